@@ -1,0 +1,374 @@
+"""Load and check predictions and ground-truth files, reporting every problem at once.
+
+Valid files take a fast path (whole-column type checks and one numpy conversion); only when that
+path finds something wrong does a per-detection scan run, so that each problem can be named by
+frame id and detection index.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from itertools import chain
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES, MAX_DETECTIONS_PER_FRAME
+
+PREDICTION_REQUIRED = ("x", "y", "score")
+PREDICTION_OPTIONAL = ("length", "width", "yaw", "vx", "vy")
+GROUND_TRUTH_REQUIRED = ("x", "y")
+
+_NUMBER_TYPES = frozenset({float, int})
+
+
+@dataclass(frozen=True)
+class DetectionTable:
+    """Detections of many frames as flat columns.
+
+    Attributes
+    ----------
+    frame_ids
+        Frame ids ``"<scene_id>/<timestamp_ns>"`` in file order, length F.
+    offsets
+        int64 (F + 1,): detections of frame f are rows ``offsets[f]:offsets[f + 1]``, in list order.
+    x_m, y_m
+        float64 (N,), ego frame, metres.
+    score
+        float64 (N,) for predictions, None for ground truth.
+    """
+
+    frame_ids: list[str]
+    offsets: np.ndarray
+    x_m: np.ndarray
+    y_m: np.ndarray
+    score: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n_frames = len(self.frame_ids)
+        if self.offsets.shape != (n_frames + 1,):
+            raise ValueError(f"offsets must have shape ({n_frames + 1},), got {self.offsets.shape}")
+        n = int(self.offsets[-1])
+        for name in ("x_m", "y_m") + (("score",) if self.score is not None else ()):
+            if getattr(self, name).shape != (n,):
+                raise ValueError(f"{name} must have shape ({n},), got {getattr(self, name).shape}")
+
+    @property
+    def counts(self) -> np.ndarray:
+        """int64 (F,): detections per frame."""
+        return np.diff(self.offsets)
+
+    @property
+    def frame_of_row(self) -> np.ndarray:
+        """int64 (N,): the frame index of every detection row."""
+        return np.repeat(np.arange(len(self.frame_ids), dtype=np.int64), self.counts)
+
+
+@dataclass
+class CheckedInput:
+    """The outcome of checking one input file.
+
+    Attributes
+    ----------
+    table
+        The detections, or None when any problem was found.
+    frame_ids
+        Frame ids read (even when detections have problems, so that frame sets can still be
+        compared), or None when the frame mapping itself could not be read.
+    problems
+        Every problem found, each naming its frame and detection index.
+    meta
+        The predictions' ``meta`` object (empty for ground truth).
+    split
+        The split named by a ground-truth source, when known.
+    """
+
+    table: DetectionTable | None
+    frame_ids: list[str] | None
+    problems: list[str]
+    meta: dict = field(default_factory=dict)
+    split: str | None = None
+
+
+def load_document(
+    source: Any, *, what: str, max_bytes: int = DEFAULT_MAX_BYTES
+) -> tuple[Any, list[str]]:
+    """Read a JSON document from a path, or pass through an already-loaded object.
+
+    The size limit is checked before reading. Python's ``json`` accepts the non-standard
+    literals NaN and Infinity; they are let through here and reported as non-finite values,
+    with their location, by the column checks.
+
+    Parameters
+    ----------
+    source
+        A path (str or os.PathLike) or an already-parsed object.
+    what
+        "predictions" or "ground truth", used in messages.
+    max_bytes
+        Files larger than this are refused unread.
+
+    Returns
+    -------
+    (document, problems)
+        ``document`` is None when ``problems`` is non-empty.
+    """
+    if not isinstance(source, (str, os.PathLike)):
+        return source, []
+    path = Path(source)
+    if not path.exists():
+        return None, [f"{what} file {str(path)!r} does not exist"]
+    if not path.is_file():
+        return None, [f"{what} path {str(path)!r} is not a file"]
+    size = path.stat().st_size
+    if size > max_bytes:
+        return None, [
+            f"{what} file {str(path)!r} is {size:,} bytes, over the limit of {max_bytes:,} bytes "
+            "(raise the limit with --max-bytes if this is intended)"
+        ]
+    try:
+        return json.loads(path.read_bytes()), []
+    except UnicodeDecodeError as exc:
+        return None, [f"{what} file {str(path)!r} is not JSON text: {exc}"]
+    except json.JSONDecodeError as exc:
+        return None, [f"{what} file {str(path)!r} is not valid JSON: {exc}"]
+    except RecursionError:
+        return None, [f"{what} file {str(path)!r} is nested too deeply to be a {what} file"]
+
+
+def _type_name(value: Any) -> str:
+    return "null" if value is None else type(value).__name__
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _number_problem(value: Any) -> str | None:
+    """Why ``value`` is not a finite JSON number, or None when it is one."""
+    if type(value) not in _NUMBER_TYPES:  # bool is a subclass of int and is refused here
+        return f"must be a number, got {_type_name(value)} {_short(value)}"
+    try:
+        as_float = float(value)
+    except OverflowError:
+        return f"is too large for a float ({_short(value)})"
+    if not math.isfinite(as_float):
+        return f"is not finite ({value})"
+    return None
+
+
+def _detection_problems(
+    who: str, frame_id: str, index: int, detection: Any, required: tuple[str, ...], optional: tuple[str, ...]
+) -> list[str]:
+    where = f"{who} frame {frame_id!r} detection {index}"
+    if not isinstance(detection, dict):
+        return [f"{where}: expected an object with {', '.join(required)}, got {_type_name(detection)}"]
+    problems = []
+    for key in required:
+        if key not in detection:
+            problems.append(f"{where}: missing {key!r}")
+            continue
+        reason = _number_problem(detection[key])
+        if reason:
+            problems.append(f"{where}: {key!r} {reason}")
+    for key in optional:
+        if key in detection:
+            reason = _number_problem(detection[key])
+            if reason:
+                problems.append(f"{where}: {key!r} {reason}")
+    return problems
+
+
+def _columns(
+    flat: list[Any], required: tuple[str, ...]
+) -> dict[str, np.ndarray] | None:
+    """Fast path: the required columns as float64, or None if any value is missing or not a number."""
+    try:
+        lists = {key: [detection[key] for detection in flat] for key in required}
+    except (KeyError, TypeError, IndexError):
+        return None
+    if not all(set(map(type, values)) <= _NUMBER_TYPES for values in lists.values()):
+        return None
+    try:
+        return {key: np.array(values, dtype=np.float64) for key, values in lists.items()}
+    except OverflowError:
+        return None
+
+
+def read_frames(
+    frames: dict,
+    *,
+    who: str,
+    required: tuple[str, ...],
+    optional: tuple[str, ...] = (),
+    max_per_frame: int | None = None,
+) -> CheckedInput:
+    """Check a ``{frame_id: [detection, ...]}`` mapping and turn it into a :class:`DetectionTable`.
+
+    Parameters
+    ----------
+    frames
+        The mapping (already known to be a dict).
+    who
+        "predictions" or "ground truth", used in messages.
+    required
+        Keys every detection must carry as finite numbers (``x``, ``y`` and, for predictions, ``score``).
+    optional
+        Keys that, when present, must be finite numbers.
+    max_per_frame
+        Limit on detections per frame, or None.
+
+    Returns
+    -------
+    CheckedInput
+    """
+    problems: list[str] = []
+    all_frame_ids: list[str] = []
+    frame_ids: list[str] = []
+    lists: list[list] = []
+    for frame_id, detections in frames.items():
+        if not isinstance(frame_id, str):
+            problems.append(f"{who} frame id {_short(frame_id)} is not a string")
+            continue
+        all_frame_ids.append(frame_id)
+        if not isinstance(detections, list):
+            problems.append(
+                f"{who} frame {frame_id!r}: expected a list of detections, got {_type_name(detections)}"
+            )
+            continue
+        if max_per_frame is not None and len(detections) > max_per_frame:
+            problems.append(
+                f"{who} frame {frame_id!r}: {len(detections)} detections, more than the limit of "
+                f"{max_per_frame} per frame"
+            )
+        frame_ids.append(frame_id)
+        lists.append(detections)
+
+    counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+    offsets = np.zeros(len(lists) + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    flat = list(chain.from_iterable(lists))
+    columns = _columns(flat, required)
+
+    suspects: np.ndarray
+    if columns is None:
+        suspects = np.arange(len(flat))
+    else:
+        finite = np.ones(len(flat), dtype=bool)
+        for values in columns.values():
+            finite &= np.isfinite(values)
+        # Detections with more keys than the required ones may carry optional fields to check.
+        n_required = len(required)
+        extra_keys = np.fromiter((len(d) != n_required for d in flat), dtype=bool, count=len(flat))
+        suspects = np.flatnonzero(~finite | (extra_keys if optional else np.zeros_like(finite)))
+
+    if len(suspects):
+        frame_of = np.searchsorted(offsets, suspects, side="right") - 1
+        for row, frame in zip(suspects.tolist(), frame_of.tolist()):
+            index = row - int(offsets[frame])
+            problems += _detection_problems(
+                who, frame_ids[frame], index, flat[row], required, optional
+            )
+
+    if problems or columns is None:
+        return CheckedInput(None, all_frame_ids, problems)
+    table = DetectionTable(
+        frame_ids=frame_ids,
+        offsets=offsets,
+        x_m=columns["x"],
+        y_m=columns["y"],
+        score=columns.get("score"),
+    )
+    return CheckedInput(table, all_frame_ids, [])
+
+
+def read_predictions(document: Any) -> CheckedInput:
+    """Check a predictions document ``{"meta": {...}, "results": {frame_id: [...]}}``."""
+    if not isinstance(document, dict):
+        return CheckedInput(None, None, [
+            "predictions: expected a JSON object with 'meta' and 'results', "
+            f"got {_type_name(document)}"
+        ])
+    problems = []
+    meta = document.get("meta", {})
+    if not isinstance(meta, dict):
+        problems.append(f"predictions: 'meta' must be an object, got {_type_name(meta)}")
+        meta = {}
+    elif "method" in meta and not isinstance(meta["method"], str):
+        problems.append(f"predictions: 'meta.method' must be a string, got {_type_name(meta['method'])}")
+    if "results" not in document:
+        problems.append(
+            "predictions: missing 'results' (an object mapping frame id to a list of detections)"
+        )
+        return CheckedInput(None, None, problems, meta)
+    results = document["results"]
+    if not isinstance(results, dict):
+        problems.append(
+            f"predictions: 'results' must be an object mapping frame id to a list of detections, "
+            f"got {_type_name(results)}"
+        )
+        return CheckedInput(None, None, problems, meta)
+    checked = read_frames(
+        results,
+        who="predictions",
+        required=PREDICTION_REQUIRED,
+        optional=PREDICTION_OPTIONAL,
+        max_per_frame=MAX_DETECTIONS_PER_FRAME,
+    )
+    checked.problems[:0] = problems
+    checked.meta = meta
+    if checked.problems:
+        checked.table = None
+    return checked
+
+
+def read_ground_truth_document(document: Any) -> CheckedInput:
+    """Check a ground-truth document ``{"frames": {frame_id: [{"x", "y", ...}]}}``.
+
+    The document's ``"split"`` member, when it is a string, is reported as the split.
+    """
+    if not isinstance(document, dict):
+        return CheckedInput(None, None, [
+            f"ground truth: expected a JSON object with 'frames', got {_type_name(document)}"
+        ])
+    split = document.get("split") if isinstance(document.get("split"), str) else None
+    if "frames" not in document:
+        return CheckedInput(None, None, [
+            "ground truth: missing 'frames' (an object mapping frame id to a list of objects)"
+        ], split=split)
+    frames = document["frames"]
+    if not isinstance(frames, dict):
+        return CheckedInput(None, None, [
+            f"ground truth: 'frames' must be an object mapping frame id to a list, got {_type_name(frames)}"
+        ], split=split)
+    checked = read_frames(frames, who="ground truth", required=GROUND_TRUTH_REQUIRED)
+    checked.split = split
+    return checked
+
+
+def frame_set_problems(pred_frame_ids: list[str], gt_frame_ids: list[str], *, partial: bool) -> list[str]:
+    """Frames that are in one input and not in the other.
+
+    Every ground-truth frame must appear in the predictions (an empty list says "no detections")
+    unless ``partial``; every prediction frame must be a ground-truth frame.
+    """
+    problems = []
+    gt_ids = set(gt_frame_ids)
+    pred_ids = set(pred_frame_ids)
+    for frame_id in pred_frame_ids:
+        if frame_id not in gt_ids:
+            hint = "" if "/" in frame_id else " (frame ids are '<scene_id>/<timestamp_ns>')"
+            problems.append(f"predictions frame {frame_id!r} is not in the ground truth{hint}")
+    if not partial:
+        for frame_id in gt_frame_ids:
+            if frame_id not in pred_ids:
+                problems.append(
+                    f"ground truth frame {frame_id!r} is missing from predictions 'results' "
+                    "(give [] for a frame without detections, or use --partial to evaluate a subset)"
+                )
+    return problems
