@@ -1,0 +1,364 @@
+"""Reading format-v1 datasets from a local path or an fsspec URL (read-only, lazy).
+
+>>> index = open_dataset("path/to/root")                       # doctest: +SKIP
+>>> scene = index.open_scene(index.scene_ids("train")[0])      # metadata only
+>>> cube = scene.array("radar/left/cube")[3]                   # reads one chunk
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+import fsspec
+import numpy as np
+
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.format import stores
+from zendar_dataset.format.calibration import Calibration
+from zendar_dataset.format.checks import check_scene_metadata
+from zendar_dataset.format.schema import (
+    DATASET_JSON,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    LABEL_FIELD_NAMES,
+    LABELS,
+    SENSOR_GROUPS,
+)
+
+
+def _read_text(location: str, storage_options: dict | None) -> str:
+    if stores.is_url(location):
+        with fsspec.open(location, "r", encoding="utf-8", **(storage_options or {})) as handle:
+            return handle.read()
+    with open(stores.local_path(location), encoding="utf-8") as handle:
+        return handle.read()
+
+
+def check_dataset_json(document: Any, where: str) -> list[str]:
+    """Every violation of the ``dataset.json`` schema (docs/format.md)."""
+    if not isinstance(document, dict):
+        return [f"{where}: expected a JSON object, found {type(document).__name__}"]
+    problems = []
+    if document.get("format") != FORMAT_NAME:
+        problems.append(f"{where}: format: expected {FORMAT_NAME!r}, found {document.get('format')!r}")
+    if document.get("format_version") != FORMAT_VERSION:
+        problems.append(f"{where}: format_version: expected {FORMAT_VERSION}, found {document.get('format_version')!r}")
+    if not isinstance(document.get("name"), str):
+        problems.append(f"{where}: name: expected a string, found {document.get('name')!r}")
+    scenes = document.get("scenes")
+    if not isinstance(scenes, dict):
+        problems.append(f"{where}: scenes: expected {{scene_id: {{\"path\": ...}}}}, found {scenes!r}")
+        scenes = {}
+    for scene_id, entry in scenes.items():
+        path = entry.get("path") if isinstance(entry, dict) else None
+        if not isinstance(path, str) or not path:
+            problems.append(f"{where}: scenes.{scene_id}.path: expected a relative store path, found {path!r}")
+        elif path.startswith("/") or ".." in path.split("/") or not path.endswith(tuple(stores.SUFFIX_BACKEND)):
+            problems.append(f"{where}: scenes.{scene_id}.path: expected a relative path ending in .zarr or .h5, found {path!r}")
+    splits = document.get("splits")
+    if not isinstance(splits, dict):
+        problems.append(f"{where}: splits: expected {{split: [scene_id, ...]}}, found {splits!r}")
+        splits = {}
+    for split, scene_ids in splits.items():
+        if not isinstance(scene_ids, list) or not all(isinstance(s, str) for s in scene_ids):
+            problems.append(f"{where}: splits.{split}: expected a list of scene ids, found {scene_ids!r}")
+            continue
+        for scene_id in scene_ids:
+            if scene_id not in scenes:
+                problems.append(f"{where}: splits.{split}: expected scene {scene_id!r} in scenes, found no entry")
+    return problems
+
+
+class DatasetIndex:
+    """A dataset root: its ``dataset.json`` and how to open each scene.
+
+    Attributes
+    ----------
+    root : str
+        Local path or fsspec URL of the root.
+    name : str
+    splits : dict[str, list[str]]
+    scenes : dict[str, str]
+        Scene id → store path relative to the root.
+    """
+
+    def __init__(self, root: str, document: dict, storage_options: dict | None = None) -> None:
+        self.root = root
+        self.storage_options = dict(storage_options or {})
+        self.document = document
+        self.name: str = document["name"]
+        self.splits: dict[str, list[str]] = {k: list(v) for k, v in document["splits"].items()}
+        self.scenes: dict[str, str] = {k: v["path"] for k, v in document["scenes"].items()}
+
+    def __repr__(self) -> str:
+        sizes = ", ".join(f"{k}={len(v)}" for k, v in self.splits.items())
+        return f"DatasetIndex(root={self.root!r}, name={self.name!r}, scenes={len(self.scenes)}, splits: {sizes})"
+
+    def scene_ids(self, split: str | None = None) -> list[str]:
+        """Scene ids of ``split`` in the order listed (every scene when None)."""
+        if split is None:
+            return list(self.scenes)
+        if split not in self.splits:
+            raise ZendarFormatError(
+                f"{self.root}: dataset.json splits: expected one of {sorted(self.splits)}, found unknown split {split!r}"
+            )
+        return list(self.splits[split])
+
+    def scene_location(self, scene_id: str) -> str:
+        """Path or URL of a scene's store."""
+        if scene_id not in self.scenes:
+            raise ZendarFormatError(
+                f"{self.root}: dataset.json scenes: expected a scene id listed there, found unknown scene {scene_id!r}"
+            )
+        return stores.join_location(self.root, self.scenes[scene_id])
+
+    def open_scene(self, scene_id: str) -> "SceneReader":
+        """Open a scene read-only (metadata only)."""
+        return SceneReader(self.scene_location(scene_id), self.storage_options, scene_id=scene_id)
+
+
+def open_dataset(root: str | os.PathLike, storage_options: dict | None = None) -> DatasetIndex:
+    """Open a dataset root (local path or fsspec URL such as ``s3://bucket/root``) read-only.
+
+    Parameters
+    ----------
+    root
+        Directory or URL holding ``dataset.json``.
+    storage_options
+        Passed to fsspec for URLs (e.g. ``{"endpoint_url": ..., "anon": True}``).
+
+    Raises
+    ------
+    ZendarFormatError
+        When ``dataset.json`` is missing, not JSON, or violates the schema (all problems listed).
+    """
+    root = os.fspath(root)
+    if stores.is_url(root):
+        root = root.rstrip("/")
+    location = stores.join_location(root, DATASET_JSON)
+    try:
+        text = _read_text(location, storage_options)
+    except FileNotFoundError:
+        raise ZendarFormatError(f"{root}: expected {DATASET_JSON} at the dataset root, found none") from None
+    try:
+        document = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ZendarFormatError(f"{location}: expected JSON, found invalid text ({exc})") from None
+    problems = check_dataset_json(document, location)
+    if problems:
+        raise ZendarFormatError("; ".join(problems), problems)
+    return DatasetIndex(root, document, storage_options)
+
+
+class StoredArray:
+    """A lazy array of a scene: slicing reads only the chunks it needs.
+
+    Wraps the backend's ``zarr.Array`` or ``h5py.Dataset`` (``.raw``) so that a
+    truncated or corrupt chunk raises :class:`ZendarFormatError` naming the scene and path.
+    """
+
+    def __init__(self, array: Any, scene_id: str, path: str) -> None:
+        self.raw = array
+        self.scene_id = scene_id
+        self.path = path
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.raw.shape)
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.dtype(self.raw.dtype)
+
+    @property
+    def ndim(self) -> int:
+        return len(self.raw.shape)
+
+    @property
+    def chunks(self) -> tuple[int, ...] | None:
+        return stores.chunk_shape(self.raw)
+
+    def __len__(self) -> int:
+        return int(self.raw.shape[0])
+
+    def __getitem__(self, key: Any) -> np.ndarray:
+        try:
+            return self.raw[key]
+        except IndexError:
+            raise
+        except stores.DECODE_ERRORS as exc:
+            raise ZendarFormatError(
+                f"{self.scene_id}: {self.path}: expected readable {self.dtype.name} chunks, "
+                f"found a truncated or corrupt chunk ({type(exc).__name__}: {exc})"
+            ) from exc
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        data = self[...]
+        return data if dtype is None else data.astype(dtype, copy=False)
+
+    def __repr__(self) -> str:
+        return f"StoredArray({self.scene_id}:{self.path}, shape={self.shape}, dtype={self.dtype.name})"
+
+
+class SceneReader:
+    """One scene store, opened read-only and lazily.
+
+    Opening checks attributes and array metadata (no bulk data).  The reader
+    pickles as its location: a copy in another process (DataLoader workers
+    under spawn) or a forked child reopens its own handle on first use.
+
+    Attributes
+    ----------
+    scene_id : str
+    enu_origin : dict
+        ``{"lat_deg", "lon_deg", "height_m"}`` of the scene's ENU frame.
+    calibration : Calibration
+    backend : {"zarr", "hdf5"}
+    location : str
+        Path or URL of the store.
+    """
+
+    def __init__(self, location: str | os.PathLike, storage_options: dict | None = None, *, scene_id: str | None = None) -> None:
+        self.location = os.fspath(location)
+        self.storage_options = dict(storage_options or {})
+        self._expected_scene_id = scene_id
+        self._label = scene_id or self.location
+        self._store: stores.OpenStore | None = None
+        self._pid: int | None = None
+        self._timestamps: dict[str, np.ndarray] = {}
+        self._offsets: dict[str, np.ndarray] = {}
+        self._open()
+
+    def _open(self) -> None:
+        try:
+            store = stores.open_store(self.location, self.storage_options)
+        except FileNotFoundError:
+            raise ZendarFormatError(f"{self._label}: expected a scene store at {self.location}, found none") from None
+        except (OSError, ValueError) as exc:
+            raise ZendarFormatError(f"{self._label}: {self.location}: expected a readable zarr/HDF5 store ({exc})") from None
+        meta, problems = check_scene_metadata(store.root, self._label, self._expected_scene_id)
+        if problems:
+            store.close()
+            raise ZendarFormatError("; ".join(problems), problems)
+        self._store = store
+        self._pid = os.getpid()
+        self.backend: str = store.backend
+        self.scene_id: str = meta.scene_id
+        self.enu_origin: dict = meta.enu_origin
+        self.calibration: Calibration = meta.calibration
+        self.attrs: dict = meta.attrs
+        self.streams: list[str] = meta.streams
+
+    @property
+    def _root(self) -> Any:
+        if self._store is None or self._pid != os.getpid():
+            # A forked child must not share the parent's file handle.
+            self._store = None
+            self._open()
+        return self._store.root
+
+    # -- pickling: location only --------------------------------------------
+    def __getstate__(self) -> dict:
+        return {
+            "location": self.location,
+            "storage_options": self.storage_options,
+            "expected_scene_id": self._expected_scene_id,
+            "timestamps": self._timestamps,
+            "offsets": self._offsets,
+            "metadata": (self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams),
+        }
+
+    def __setstate__(self, state: dict) -> None:
+        self.location = state["location"]
+        self.storage_options = state["storage_options"]
+        self._expected_scene_id = state["expected_scene_id"]
+        self._label = self._expected_scene_id or self.location
+        self._timestamps = state["timestamps"]
+        self._offsets = state["offsets"]
+        self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams = state["metadata"]
+        self._store = None
+        self._pid = None
+
+    def __enter__(self) -> "SceneReader":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"SceneReader({self.scene_id!r}, backend={self.backend!r}, streams={self.streams})"
+
+    def close(self) -> None:
+        """Close the store handle (it reopens on next use)."""
+        if self._store is not None and self._pid == os.getpid():
+            self._store.close()
+        self._store = None
+
+    # -- access --------------------------------------------------------------
+    def sensors(self, group: str) -> list[str]:
+        """Sorted sensor names under ``radar``, ``sar``, ``camera`` or ``lidar``."""
+        if group not in SENSOR_GROUPS:
+            raise ValueError(f"group: expected one of {SENSOR_GROUPS}, found {group!r}")
+        return sorted(s.split("/", 1)[1] for s in self.streams if s.startswith(group + "/"))
+
+    def has(self, path: str) -> bool:
+        """Whether an array or group exists at ``path`` inside the scene."""
+        return stores.get_node(self._root, path.strip("/")) is not None
+
+    def array(self, path: str) -> StoredArray:
+        """The lazy array at ``path`` (e.g. ``"radar/left/cube"``)."""
+        node = stores.get_node(self._root, path.strip("/"))
+        if node is None or not stores.is_array(node):
+            raise ZendarFormatError(f"{self.scene_id}: {path}: expected an array, found {'a group' if node is not None else 'nothing'}")
+        return StoredArray(node, self.scene_id, path.strip("/"))
+
+    def timestamps(self, stream: str) -> np.ndarray:
+        """``timestamp_ns`` [N] int64 of a stream (``"radar/left"``, ``"tracklog"``, ``"labels/moving_cars"``…).
+
+        Raises ZendarFormatError unless strictly increasing (label timestamps may repeat).
+        """
+        stream = stream.strip("/")
+        if stream not in self._timestamps:
+            if stream not in self.streams:
+                raise ZendarFormatError(
+                    f"{self.scene_id}: {stream}: expected one of the scene's streams {self.streams}, found no such stream"
+                )
+            values = np.asarray(self.array(f"{stream}/timestamp_ns")[...], dtype=np.int64)
+            steps = np.diff(values)
+            bad = np.flatnonzero(steps < 0 if stream == LABELS else steps <= 0)
+            if bad.size:
+                i = int(bad[0]) + 1
+                order = "non-decreasing" if stream == LABELS else "strictly increasing"
+                raise ZendarFormatError(
+                    f"{self.scene_id}: {stream}/timestamp_ns: expected {order} timestamps, "
+                    f"found {values[i]} at index {i} after {values[i - 1]}"
+                )
+            self._timestamps[stream] = values
+        return self._timestamps[stream]
+
+    def lidar_points(self, sensor: str, frame: int) -> np.ndarray:
+        """Points ``[P, 4]`` float32 (x, y, z, intensity; lidar frame, metres) of one sweep."""
+        stream = f"lidar/{sensor}"
+        if stream not in self._offsets:
+            offsets = np.asarray(self.array(f"{stream}/offsets")[...], dtype=np.int64)
+            total = self.array(f"{stream}/points").shape[0]
+            if offsets[0] != 0 or offsets[-1] != total or np.any(np.diff(offsets) < 0):
+                raise ZendarFormatError(
+                    f"{self.scene_id}: {stream}/offsets: expected non-decreasing offsets from 0 to {total} (rows of points), "
+                    f"found {offsets[0]} … {offsets[-1]}"
+                )
+            self._offsets[stream] = offsets
+        offsets = self._offsets[stream]
+        n = offsets.shape[0] - 1
+        if not -n <= frame < n:
+            raise IndexError(f"{self.scene_id}: {stream}: frame {frame} out of range for {n} sweeps")
+        frame %= n
+        return self.array(f"{stream}/points")[offsets[frame] : offsets[frame + 1]]
+
+    def labels(self) -> dict[str, np.ndarray] | None:
+        """Every field of ``labels/moving_cars`` as 1-D arrays, or None when labels are withheld."""
+        if LABELS not in self.streams:
+            return None
+        return {name: self.array(f"{LABELS}/{name}")[...] for name in LABEL_FIELD_NAMES}

@@ -1,0 +1,245 @@
+"""The two storage backends of format v1: Zarr v3 directories and HDF5 files.
+
+Both hold the same hierarchy.  This module hides their few differences from
+the writer, reader, validator and converter:
+
+- object-valued attributes are native JSON in zarr and JSON strings in HDF5;
+- how arrays are created (chunks, compression, a resizable first axis);
+- how a store is opened from a local path or an fsspec URL;
+- which exceptions mean "stored bytes could not be decoded".
+
+Compression is chosen per kind of array (measured in ``benchmarks/bench_format.py``):
+complex radar cubes and SAR images are noise-like and do not compress, so they
+are stored raw and read at page-cache speed; camera images and lidar points use
+a fast byte-shuffling compressor (Blosc-LZ4 in zarr, LZF in HDF5); the small
+per-frame arrays use the backends' default lossless compressors.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import fsspec
+import h5py
+import numpy as np
+import zarr
+import zarr.storage
+from zarr.codecs import BloscCodec, ZstdCodec
+
+BACKENDS = ("zarr", "hdf5")
+SUFFIX_BACKEND = {".zarr": "zarr", ".h5": "hdf5", ".hdf5": "hdf5"}
+
+RAW = "raw"
+FAST = "fast"
+SMALL = "small"
+
+# Exceptions a backend raises when stored bytes are truncated or corrupt.
+# IndexError/KeyError are deliberately absent: they mean a bad request, not bad data.
+DECODE_ERRORS: tuple[type[BaseException], ...] = (ValueError, RuntimeError, OSError, TypeError, EOFError)
+
+_ZARR_COMPRESSORS = {
+    RAW: None,
+    FAST: (BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),),
+    SMALL: (ZstdCodec(level=3),),
+}
+_HDF5_COMPRESSION = {
+    RAW: {},
+    FAST: {"compression": "lzf", "shuffle": True},
+    SMALL: {"compression": "gzip", "compression_opts": 4, "shuffle": True},
+}
+
+
+def backend_from_path(path: str | os.PathLike) -> str:
+    """Backend named by a store's suffix: ``.zarr`` → zarr, ``.h5``/``.hdf5`` → hdf5."""
+    suffix = pathlib.PurePosixPath(str(path).rstrip("/")).suffix.lower()
+    if suffix not in SUFFIX_BACKEND:
+        raise ValueError(f"{path}: cannot tell the backend from the suffix {suffix!r}; expected .zarr or .h5")
+    return SUFFIX_BACKEND[suffix]
+
+
+def is_url(location: str | os.PathLike) -> bool:
+    """True for fsspec URLs other than plain local files (``s3://``, ``http://`` …)."""
+    text = str(location)
+    return "://" in text and not text.startswith("file://")
+
+
+def local_path(location: str | os.PathLike) -> str:
+    text = str(location)
+    return text[len("file://"):] if text.startswith("file://") else text
+
+
+def join_location(root: str, relative: str) -> str:
+    """``root/relative`` for local paths and URLs alike."""
+    if is_url(root):
+        return root.rstrip("/") + "/" + relative.lstrip("/")
+    return str(pathlib.Path(local_path(root)) / relative)
+
+
+@dataclass
+class OpenStore:
+    """An open scene store: its root group plus whatever must be closed with it."""
+
+    backend: str
+    root: Any
+    _closers: list = field(default_factory=list)
+
+    def close(self) -> None:
+        for closer in reversed(self._closers):
+            closer()
+        self._closers.clear()
+
+
+def create_store(path: pathlib.Path, backend: str) -> OpenStore:
+    """Create an empty store at ``path`` (which must not exist) for writing."""
+    if backend == "zarr":
+        root = zarr.open_group(zarr.storage.LocalStore(str(path)), mode="w-", zarr_format=3)
+        return OpenStore(backend, root)
+    if backend == "hdf5":
+        handle = h5py.File(path, "w-", libver=("earliest", "latest"))
+        return OpenStore(backend, handle, [handle.close])
+    raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+
+
+def open_store(location: str | os.PathLike, storage_options: dict | None = None) -> OpenStore:
+    """Open a scene store read-only from a local path or an fsspec URL."""
+    backend = backend_from_path(location)
+    if backend == "zarr":
+        if is_url(location):
+            store = zarr.storage.FsspecStore.from_url(
+                str(location), storage_options=dict(storage_options or {}), read_only=True
+            )
+        else:
+            path = local_path(location)
+            if not os.path.isdir(path):
+                raise FileNotFoundError(path)
+            store = zarr.storage.LocalStore(path, read_only=True)
+        root = zarr.open_group(store, mode="r", zarr_format=3, use_consolidated=False)
+        return OpenStore(backend, root)
+    if is_url(location):
+        fs, fs_path = fsspec.core.url_to_fs(str(location), **(storage_options or {}))
+        file_object = fs.open(fs_path, "rb")
+        handle = h5py.File(file_object, "r")
+        return OpenStore(backend, handle, [file_object.close, handle.close])
+    handle = h5py.File(local_path(location), "r")
+    return OpenStore(backend, handle, [handle.close])
+
+
+def is_array(node: Any) -> bool:
+    return isinstance(node, (zarr.Array, h5py.Dataset))
+
+
+def is_group(node: Any) -> bool:
+    return isinstance(node, (zarr.Group, h5py.Group))
+
+
+def get_node(group: Any, path: str) -> Any | None:
+    """The array or group at ``path`` under ``group``, or None when absent."""
+    try:
+        return group[path]
+    except KeyError:
+        return None
+
+
+def member_names(group: Any) -> list[str]:
+    """Sorted names of the direct children of a group."""
+    return sorted(group.keys())
+
+
+def walk(group: Any, prefix: str = "") -> list[tuple[str, Any]]:
+    """Every (path, node) below ``group`` in sorted order, groups before their children."""
+    out = []
+    for name in member_names(group):
+        node = group[name]
+        path = f"{prefix}{name}"
+        out.append((path, node))
+        if is_group(node):
+            out.extend(walk(node, path + "/"))
+    return out
+
+
+def require_group(root: Any, path: str) -> Any:
+    return root.require_group(path)
+
+
+def create_array(
+    root: Any,
+    path: str,
+    *,
+    shape: tuple[int, ...],
+    dtype: np.dtype,
+    chunks: tuple[int, ...],
+    kind: str,
+    resizable: bool,
+) -> Any:
+    """Create an array; ``resizable`` makes its first axis growable (HDF5 needs to know)."""
+    chunks = tuple(max(1, int(c)) for c in chunks)
+    if isinstance(root, zarr.Group):
+        # write_empty_chunks: an all-zero frame is still stored, so "every chunk
+        # exists" is a check the validator can make.
+        return root.create_array(
+            path,
+            shape=shape,
+            dtype=dtype,
+            chunks=chunks,
+            compressors=_ZARR_COMPRESSORS[kind],
+            fill_value=0,
+            config={"write_empty_chunks": True},
+        )
+    maxshape = (None, *shape[1:]) if resizable else shape
+    return root.create_dataset(
+        path, shape=shape, dtype=dtype, chunks=chunks, maxshape=maxshape, **_HDF5_COMPRESSION[kind]
+    )
+
+
+def chunk_shape(array: Any) -> tuple[int, ...] | None:
+    return tuple(array.chunks) if array.chunks is not None else None
+
+
+def count_missing_chunks(array: Any) -> int:
+    """How many chunks of ``array`` that should hold data are absent from the store."""
+    if isinstance(array, zarr.Array):
+        return int(array.nchunks) - int(array.nchunks_initialized)
+    if array.chunks is None or array.size == 0:
+        return 0
+    expected = int(np.prod([-(-n // c) for n, c in zip(array.shape, array.chunks)]))
+    return expected - int(array.id.get_num_chunks())
+
+
+def read_attrs(node: Any) -> dict[str, Any]:
+    """Attributes as plain JSON values (HDF5 JSON strings of objects decoded)."""
+    out: dict[str, Any] = {}
+    for key, value in node.attrs.items():
+        if isinstance(node, (h5py.Group, h5py.Dataset)):
+            value = _decode_hdf5_attr(value)
+        out[key] = value
+    return out
+
+
+def _decode_hdf5_attr(value: Any) -> Any:
+    if isinstance(value, bytes):
+        value = value.decode("utf-8")
+    if isinstance(value, str):
+        stripped = value.lstrip()
+        if stripped[:1] in ("{", "["):
+            try:
+                return json.loads(value)
+            except json.JSONDecodeError:
+                return value
+        return value
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_attrs(node: Any, attrs: dict[str, Any]) -> None:
+    """Write attributes; objects and lists become JSON strings in HDF5 (format v1)."""
+    for key, value in attrs.items():
+        if isinstance(node, (h5py.Group, h5py.Dataset)) and isinstance(value, (dict, list, tuple)):
+            value = json.dumps(value)
+        node.attrs[key] = value
