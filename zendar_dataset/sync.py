@@ -1,0 +1,333 @@
+"""The synchronisation index: which element of every stream goes with each reference frame.
+
+All streams are stamped by one GPS clock (int64 ns). For each reference frame a
+stream contributes either
+
+* its **nearest** element within a tolerance (``pandas.merge_asof``,
+  ``direction="nearest"``; ``|Δt| <= tolerance`` is inclusive, ties go to the
+  earlier element), or
+* for windowed streams (radar cubes), the **K latest** elements with
+  ``timestamp_ns <= reference``; the window is filled when K such elements
+  exist and the latest is within the tolerance of the reference.
+
+Δt is always ``element − reference`` in ns (for a window: its latest element).
+Default tolerances: half the stream's median frame interval for nearest
+matching (so no element serves two neighbouring frames of a same-rate stream),
+1.5 median intervals for windows (the latest element at or before the
+reference of a gapless stream is within one interval; the extra half absorbs
+capture jitter, while a missing element, a gap of two intervals, still shows).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from zendar_dataset.errors import ZendarFormatError
+
+MISSING = -1
+
+TOLERANCE_HELP = (
+    "tolerance_ms is a number (milliseconds, all streams) or a dict keyed by "
+    "'<group>/<sensor>' or '<group>'"
+)
+
+
+@dataclass(frozen=True)
+class StreamTimes:
+    """One stream's timestamps as seen by the index.
+
+    Attributes
+    ----------
+    name
+        ``"<group>/<sensor>"`` (``"tracklog"`` and ``"labels"`` have no sensor part).
+    timestamp_ns
+        ``[N]`` int64 GPS ns, strictly increasing.
+    window
+        0 for nearest matching, ``K >= 1`` for the K latest elements at or before the reference.
+    """
+
+    name: str
+    timestamp_ns: np.ndarray
+    window: int = 0
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.timestamp_ns)
+        if t.ndim != 1 or not np.issubdtype(t.dtype, np.integer):
+            raise ZendarFormatError(
+                f"{self.name}: timestamp_ns must be a 1-D int64 array, got {t.dtype} {list(t.shape)}"
+            )
+        if t.size > 1:
+            bad = np.flatnonzero(np.diff(t) <= 0)
+            if bad.size:
+                k = int(bad[0])
+                raise ZendarFormatError(
+                    f"{self.name}/timestamp_ns: must be strictly increasing; element {k + 1} "
+                    f"({int(t[k + 1])}) does not follow element {k} ({int(t[k])})"
+                )
+        if self.window < 0:
+            raise ValueError(f"{self.name}: window must be >= 0, got {self.window}")
+        object.__setattr__(self, "timestamp_ns", t.astype(np.int64, copy=False))
+
+
+def median_interval_ns(timestamp_ns: np.ndarray) -> int | None:
+    """Median spacing of a stream in ns, or None with fewer than two elements."""
+    if len(timestamp_ns) < 2:
+        return None
+    return int(np.median(np.diff(timestamp_ns)))
+
+
+def resolve_tolerances_ns(
+    streams: Sequence[StreamTimes],
+    tolerance_ms: float | Mapping[str, float] | None,
+    reference_ns: np.ndarray,
+) -> dict[str, int]:
+    """Per-stream tolerance in ns from the user's ``tolerance_ms`` and the defaults.
+
+    Raises
+    ------
+    ValueError
+        For a negative tolerance or a dict key that names no stream (a typo would
+        otherwise silently fall back to the default).
+    """
+    names = [s.name for s in streams]
+    groups = {name.split("/", 1)[0] for name in names}
+    if isinstance(tolerance_ms, Mapping):
+        unknown = sorted(k for k in tolerance_ms if k not in names and k not in groups)
+        if unknown:
+            raise ValueError(
+                f"tolerance_ms names unknown streams {unknown}; known: {sorted(set(names) | groups)}"
+            )
+        values = list(tolerance_ms.values())
+    elif tolerance_ms is None:
+        values = []
+    elif isinstance(tolerance_ms, (int, float)) and not isinstance(tolerance_ms, bool):
+        values = [tolerance_ms]
+    else:
+        raise ValueError(f"{TOLERANCE_HELP}; got {tolerance_ms!r}")
+    for value in values:
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not value >= 0:
+            raise ValueError(f"tolerances must be non-negative numbers of ms, got {value!r}")
+
+    reference_interval = median_interval_ns(reference_ns)
+    tolerances: dict[str, int] = {}
+    for stream in streams:
+        chosen: float | None = None
+        if isinstance(tolerance_ms, Mapping):
+            group = stream.name.split("/", 1)[0]
+            chosen = tolerance_ms.get(stream.name, tolerance_ms.get(group))
+        elif tolerance_ms is not None:
+            chosen = tolerance_ms
+        if chosen is not None:
+            tolerances[stream.name] = int(round(float(chosen) * 1e6))
+            continue
+        interval = median_interval_ns(stream.timestamp_ns)
+        if interval is None:
+            interval = reference_interval if reference_interval is not None else 0
+        tolerances[stream.name] = (3 * interval) // 2 if stream.window else interval // 2
+    return tolerances
+
+
+def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int) -> np.ndarray:
+    """Index of the nearest stream element within tolerance per reference time, or MISSING."""
+    if stream_ns.size == 0:
+        return np.full(reference_ns.shape, MISSING, dtype=np.int64)
+    left = pd.DataFrame({"timestamp_ns": reference_ns})
+    right = pd.DataFrame({"timestamp_ns": stream_ns, "element": np.arange(stream_ns.size, dtype=np.int64)})
+    merged = pd.merge_asof(left, right, on="timestamp_ns", direction="nearest", tolerance=tolerance_ns)
+    return merged["element"].fillna(MISSING).to_numpy(dtype=np.int64)
+
+
+def _latest(reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolerance_ns: int) -> np.ndarray:
+    """Index of the latest element of a filled window per reference time, or MISSING."""
+    last = np.searchsorted(stream_ns, reference_ns, side="right") - 1
+    filled = last >= window - 1
+    safe = np.clip(last, 0, None)
+    if stream_ns.size:
+        filled &= (reference_ns - stream_ns[safe]) <= tolerance_ns
+    else:
+        filled[:] = False
+    return np.where(filled, last, MISSING).astype(np.int64)
+
+
+@dataclass
+class SyncTable:
+    """The synchronisation index of one scene: one row per kept reference frame.
+
+    Attributes
+    ----------
+    reference
+        Name of the reference stream.
+    reference_index
+        ``[N]`` int64 index of each kept frame in the reference stream.
+    timestamp_ns
+        ``[N]`` int64 reference times.
+    element
+        Per stream ``[N]`` int64 index of the matched element (for a window: its
+        latest element; the window is ``element - K + 1 .. element``), ``-1`` if none.
+    dt_ns
+        Per stream ``[N]`` int64 ``element time − reference time``; 0 where ``element == -1``.
+    tolerance_ns
+        Per stream tolerance that was applied.
+    window
+        Per stream window length (0 = nearest).
+    dropped
+        Per stream, how many reference frames were left out because this stream
+        missed (required stream absent, or window not filled). A frame missing two
+        streams counts for both.
+    dropped_total
+        Reference frames left out for any reason.
+    """
+
+    reference: str
+    reference_index: np.ndarray
+    timestamp_ns: np.ndarray
+    element: dict[str, np.ndarray]
+    dt_ns: dict[str, np.ndarray]
+    tolerance_ns: dict[str, int]
+    window: dict[str, int]
+    dropped: dict[str, int]
+    dropped_total: int
+    n_reference: int = field(default=0)
+
+    def __len__(self) -> int:
+        return int(self.reference_index.size)
+
+    @property
+    def streams(self) -> list[str]:
+        return list(self.element)
+
+    def to_frame(self) -> pd.DataFrame:
+        """The index as a DataFrame: ``reference_index``, ``timestamp_ns`` and per stream
+        ``<stream>:element`` (nullable Int64) and ``<stream>:dt_ns`` (nullable Int64)."""
+        columns: dict[str, object] = {
+            "reference_index": self.reference_index,
+            "timestamp_ns": self.timestamp_ns,
+        }
+        for name in self.element:
+            missing = self.element[name] == MISSING
+            columns[f"{name}:element"] = pd.array(
+                np.where(missing, 0, self.element[name]), dtype="Int64"
+            )
+            columns[f"{name}:element"][missing] = pd.NA
+            dt = pd.array(self.dt_ns[name], dtype="Int64")
+            dt[missing] = pd.NA
+            columns[f"{name}:dt_ns"] = dt
+        return pd.DataFrame(columns)
+
+    def residual_stats(self) -> pd.DataFrame:
+        """Per stream: tolerance, window, matched/missing/dropped counts and Δt statistics (ns)."""
+        rows = []
+        for name in self.element:
+            present = self.element[name] != MISSING
+            dt = self.dt_ns[name][present]
+            abs_dt = np.abs(dt)
+            rows.append(
+                {
+                    "stream": name,
+                    "window": self.window[name],
+                    "tolerance_ms": self.tolerance_ns[name] / 1e6,
+                    "items": len(self),
+                    "matched": int(present.sum()),
+                    "missing": int((~present).sum()),
+                    "dropped": self.dropped[name],
+                    "dt_mean_ns": float(dt.mean()) if dt.size else np.nan,
+                    "dt_min_ns": int(dt.min()) if dt.size else pd.NA,
+                    "dt_max_ns": int(dt.max()) if dt.size else pd.NA,
+                    "abs_dt_median_ns": float(np.median(abs_dt)) if dt.size else np.nan,
+                    "abs_dt_p95_ns": float(np.percentile(abs_dt, 95)) if dt.size else np.nan,
+                    "abs_dt_max_ns": int(abs_dt.max()) if dt.size else pd.NA,
+                }
+            )
+        return pd.DataFrame(rows)
+
+
+def build_sync_table(
+    reference: StreamTimes,
+    streams: Iterable[StreamTimes],
+    tolerance_ms: float | Mapping[str, float] | None = None,
+    require: Iterable[str] = (),
+    keep_unfilled_windows: bool = False,
+) -> SyncTable:
+    """Match every stream to every reference frame.
+
+    Parameters
+    ----------
+    reference
+        The reference stream (one item per element).
+    streams
+        The other streams; windowed ones have ``window >= 1``.
+    tolerance_ms
+        None for the defaults, a number for every stream, or a dict keyed by
+        ``"<group>/<sensor>"`` or ``"<group>"`` (unmentioned streams keep defaults).
+    require
+        Stream names (``"<group>/<sensor>"``) or groups whose absence drops a frame.
+    keep_unfilled_windows
+        Keep frames whose window cannot be filled (the stream is then missing for
+        them) instead of dropping them.
+
+    Returns
+    -------
+    SyncTable
+    """
+    streams = list(streams)
+    names = [s.name for s in streams]
+    if len(set(names)) != len(names):
+        raise ValueError(f"stream names must be unique, got {names}")
+    reference_ns = reference.timestamp_ns
+    tolerances = resolve_tolerances_ns(streams, tolerance_ms, reference_ns)
+
+    required: set[str] = set()
+    groups = {name.split("/", 1)[0] for name in names}
+    for key in require:
+        if key in names:
+            required.add(key)
+        elif key in groups:
+            required.update(n for n in names if n.split("/", 1)[0] == key)
+        else:
+            raise ValueError(f"require names unknown stream {key!r}; known: {sorted(set(names) | groups)}")
+
+    element: dict[str, np.ndarray] = {}
+    keep = np.ones(reference_ns.shape, dtype=bool)
+    lacking: dict[str, np.ndarray] = {}
+    for stream in streams:
+        tol = tolerances[stream.name]
+        if stream.window:
+            idx = _latest(reference_ns, stream.timestamp_ns, stream.window, tol)
+        else:
+            idx = _nearest(reference_ns, stream.timestamp_ns, tol)
+        element[stream.name] = idx
+        must_have = stream.name in required or (stream.window and not keep_unfilled_windows)
+        if must_have:
+            lacking[stream.name] = idx == MISSING
+            keep &= idx != MISSING
+
+    dropped = {name: 0 for name in names}
+    for name, miss in lacking.items():
+        dropped[name] = int(miss.sum())
+
+    kept = np.flatnonzero(keep)
+    kept_ns = reference_ns[kept]
+    dt_ns: dict[str, np.ndarray] = {}
+    for stream in streams:
+        idx = element[stream.name][kept]
+        element[stream.name] = idx
+        matched = idx != MISSING
+        dt = np.zeros(idx.shape, dtype=np.int64)
+        dt[matched] = stream.timestamp_ns[idx[matched]] - kept_ns[matched]
+        dt_ns[stream.name] = dt
+    return SyncTable(
+        reference=reference.name,
+        reference_index=kept.astype(np.int64),
+        timestamp_ns=kept_ns,
+        element=element,
+        dt_ns=dt_ns,
+        tolerance_ns=tolerances,
+        window={s.name: s.window for s in streams},
+        dropped=dropped,
+        dropped_total=int(reference_ns.size - kept.size),
+        n_reference=int(reference_ns.size),
+    )
