@@ -7,6 +7,7 @@ the exact protocol it was computed under (see docs/evaluation.md).
 from __future__ import annotations
 
 import copy
+import importlib.metadata
 from typing import Any
 
 import numpy as np
@@ -66,6 +67,15 @@ _PROTOCOL: dict[str, Any] = {
 }
 
 
+def _evaluator_version() -> str:
+    try:
+        return importlib.metadata.version("zendar-dataset")
+    except importlib.metadata.PackageNotFoundError:  # running from a source tree, not installed
+        from zendar_dataset import __version__
+
+        return __version__
+
+
 def protocol_dict() -> dict[str, Any]:
     """The protocol as a JSON-ready dict, with the evaluator's version.
 
@@ -74,10 +84,8 @@ def protocol_dict() -> dict[str, Any]:
     dict
         A fresh copy; callers may modify it.
     """
-    from zendar_dataset import __version__
-
     protocol = copy.deepcopy(_PROTOCOL)
-    protocol["evaluator_version"] = __version__
+    protocol["evaluator_version"] = _evaluator_version()
     return protocol
 
 

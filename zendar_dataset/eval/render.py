@@ -1,0 +1,68 @@
+"""Precision-recall plots per band (matplotlib, Agg canvas: no display needed)."""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import Any
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+
+
+def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[Path]:
+    """Write ``out_dir/pr_<band>.png`` for every band.
+
+    Each plot shows the measured precision at each distinct score (dots) and the precision
+    envelope whose area is the AP (step line).
+
+    Parameters
+    ----------
+    metrics
+        The structure returned by :func:`zendar_dataset.eval.evaluate`.
+    out_dir
+        Created if missing.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written, in band order.
+    """
+    out = prepare_out_dir(out_dir)
+    method = metrics.get("meta", {}).get("method", "")
+    written = []
+    for band, (low_m, high_m) in BANDS_M.items():
+        curve = metrics["pr_curves"][band]
+        ap = metrics["ap"][band]
+        figure = Figure(figsize=(5, 4), dpi=100)
+        FigureCanvasAgg(figure)
+        axes = figure.add_subplot()
+        if ap is None:
+            axes.text(0.5, 0.5, "no ground truth in this band", ha="center", va="center")
+            title_ap = "AP n/a"
+        elif not curve["recall"]:
+            axes.text(0.5, 0.5, "no detections in this band", ha="center", va="center")
+            title_ap = f"AP {100.0 * ap:.1f}%"
+        else:
+            recall = [0.0] + curve["recall"]
+            envelope = curve["precision_envelope"][:1] + curve["precision_envelope"]
+            axes.step(recall, envelope, where="pre", label="precision envelope")
+            axes.plot(curve["recall"], curve["precision"], ".", markersize=3, label="precision")
+            axes.legend(loc="lower left")
+            title_ap = f"AP {100.0 * ap:.1f}%"
+        axes.set_xlim(0.0, 1.0)
+        axes.set_ylim(0.0, 1.02)
+        axes.set_xlabel("recall")
+        axes.set_ylabel("precision")
+        axes.set_title(f"{method} {band} [{low_m:g}, {high_m:g}) m: {title_ap}".strip())
+        axes.grid(alpha=0.3)
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png")
+        path = out / f"pr_{band}.png"
+        write_atomically(path, buffer.getvalue())
+        written.append(path)
+    return written

@@ -1,0 +1,98 @@
+"""The printed table (AP in percent, like the paper's Table 1) and the atomic metrics.json write."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval.protocol import BANDS_M
+
+METRICS_FILENAME = "metrics.json"
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{100.0 * value:.1f}"
+
+
+def format_table(metrics: dict[str, Any]) -> str:
+    """A plain-text table of AP per band (percent) with GT/TP/FP counts.
+
+    Parameters
+    ----------
+    metrics
+        The structure returned by :func:`zendar_dataset.eval.evaluate`.
+
+    Returns
+    -------
+    str
+        Several lines, no trailing newline.
+    """
+    method = metrics.get("meta", {}).get("method", "(no meta.method)")
+    header = [f"method: {method}"]
+    if "split" in metrics:
+        header.append(f"split: {metrics['split']}")
+    header.append(f"{metrics['n_frames']} frames, {metrics['n_scenes']} scenes")
+    lines = [" | ".join(header)]
+    if metrics["partial"]:
+        lines.append(
+            f"PARTIAL evaluation: {metrics['n_frames']} of {metrics['n_frames_ground_truth']} "
+            "ground-truth frames (only frames present in the predictions)"
+        )
+    bootstrap = metrics.get("bootstrap")
+    columns = f"{'band':<5} {'range [m]':<10} {'AP [%]':>7}"
+    if bootstrap:
+        columns += f"  {'95% CI [%]':<14}"
+    columns += f" {'GT':>8} {'TP':>8} {'FP':>8}"
+    lines += [columns, "-" * len(columns)]
+    for band, (low_m, high_m) in BANDS_M.items():
+        row = f"{band:<5} {f'[{low_m:g}, {high_m:g})':<10} {_percent(metrics['ap'][band]):>7}"
+        if bootstrap:
+            interval = bootstrap[band]
+            text = (
+                "n/a"
+                if interval["low"] is None
+                else f"[{_percent(interval['low'])}, {_percent(interval['high'])}]"
+            )
+            row += f"  {text:<14}"
+        counts = metrics["counts"][band]
+        row += f" {counts['gt']:>8} {counts['tp']:>8} {counts['fp']:>8}"
+        lines.append(row)
+    if any(value is None for value in metrics["ap"].values()):
+        lines.append("n/a: the band has no ground truth")
+    if bootstrap:
+        n = max(interval["n"] for interval in bootstrap.values())
+        lines.append(f"95% CI: percentile bootstrap over up to {n} scene resamples per band")
+    return "\n".join(lines)
+
+
+def write_atomically(path: Path, data: bytes) -> None:
+    """Write ``data`` to a temporary name beside ``path``, then rename it into place."""
+    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(descriptor, "wb") as handle:
+            handle.write(data)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def prepare_out_dir(out_dir: str | os.PathLike) -> Path:
+    """Create ``out_dir`` (and parents) unless it exists; refuse a path that is a file."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ZendarError(f"--out {str(out)!r} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def write_metrics(metrics: dict[str, Any], out_dir: str | os.PathLike) -> Path:
+    """Write ``metrics`` as ``out_dir/metrics.json`` (strict JSON, atomic); returns the path."""
+    path = prepare_out_dir(out_dir) / METRICS_FILENAME
+    text = json.dumps(metrics, indent=1, allow_nan=False) + "\n"
+    write_atomically(path, text.encode("utf-8"))
+    return path
