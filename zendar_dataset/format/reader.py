@@ -259,6 +259,11 @@ class SceneReader:
             self._open()
         return self._store.root
 
+    @property
+    def store_root(self) -> Any:
+        """The backend's root group (``zarr.Group`` or ``h5py.File``), opened read-only."""
+        return self._root
+
     # -- pickling: location only --------------------------------------------
     def __getstate__(self) -> dict:
         return {

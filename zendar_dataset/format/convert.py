@@ -1,0 +1,115 @@
+"""Lossless conversion of a dataset between the zarr and HDF5 backends.
+
+Every array is copied bit for bit with the same chunk shape, every attribute
+with an equal value; only the container and its compressors change.  The
+output is written under a temporary sibling and renamed into place, and an
+existing non-empty output is never touched.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import shutil
+import uuid
+from typing import Any
+
+import numpy as np
+
+from zendar_dataset.format import stores
+from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON
+from zendar_dataset.format.writer import write_json_atomic
+
+_TO = {"zarr": "zarr", "hdf5": "hdf5", "h5": "hdf5"}
+# Rows copied per read for arrays not stored one frame per chunk (bounds memory).
+_COPY_BLOCK_BYTES = 64 * 2**20
+
+
+def _kind(path: str) -> str:
+    group, _, rest = path.partition("/")
+    name = rest.rsplit("/", 1)[-1]
+    if (group, name) in (("radar", "cube"), ("sar", "image")):
+        return stores.RAW
+    if (group, name) in (("camera", "image"), ("lidar", "points")):
+        return stores.FAST
+    return stores.SMALL
+
+
+def _copy_array(source: Any, target_root: Any, path: str) -> None:
+    chunks = stores.chunk_shape(source) or tuple(source.shape)
+    target = stores.create_array(
+        target_root,
+        path,
+        shape=tuple(source.shape),
+        dtype=np.dtype(source.dtype),
+        chunks=chunks or (1,),
+        kind=_kind(path),
+        resizable=len(source.shape) > 0,
+    )
+    if source.size:
+        row_bytes = max(1, int(np.prod(source.shape[1:], dtype=np.int64)) * np.dtype(source.dtype).itemsize)
+        step = max(chunks[0], (_COPY_BLOCK_BYTES // row_bytes) // chunks[0] * chunks[0])
+        for start in range(0, source.shape[0], step):
+            target[start : start + step] = source[start : start + step]
+    stores.write_attrs(target, stores.read_attrs(source))
+
+
+def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str) -> None:
+    """Copy one open scene's hierarchy (groups, arrays, attributes) into a new store."""
+    target = stores.create_store(target_path, backend)
+    try:
+        stores.write_attrs(target.root, stores.read_attrs(source_root))
+        for path, node in stores.walk(source_root):
+            if stores.is_group(node):
+                stores.write_attrs(target.root.require_group(path), stores.read_attrs(node))
+            else:
+                _copy_array(node, target.root, path)
+    finally:
+        target.close()
+
+
+def convert_dataset(
+    root: str | os.PathLike, out: str | os.PathLike, to: str = "zarr", storage_options: dict | None = None
+) -> pathlib.Path:
+    """Convert every scene of ``root`` into backend ``to`` under the new root ``out``.
+
+    Parameters
+    ----------
+    root
+        Source dataset (local path or fsspec URL); only read.
+    out
+        New local dataset root; must not exist or be an empty directory.
+    to : {"zarr", "hdf5"}
+
+    Returns
+    -------
+    pathlib.Path
+        ``out``.
+    """
+    if to not in _TO:
+        raise ValueError(f"to: expected 'zarr' or 'hdf5', found {to!r}")
+    backend = _TO[to]
+    out = pathlib.Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise FileExistsError(f"{out}: output exists and is not an empty directory; choose a new path")
+    index = open_dataset(root, storage_options)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    temp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    (temp / "scenes").mkdir(parents=True)
+    try:
+        scenes = {}
+        for scene_id in index.scene_ids():
+            relative = f"scenes/{scene_id}{BACKEND_SUFFIX[backend]}"
+            with index.open_scene(scene_id) as scene:  # checks the scene's metadata first
+                convert_scene(scene.store_root, temp / relative, backend)
+            scenes[scene_id] = {"path": relative}
+        document = {**index.document, "scenes": scenes}
+        write_json_atomic(temp / DATASET_JSON, document)
+        if out.exists():
+            out.rmdir()  # empty, checked above
+        os.replace(temp, out)
+    except BaseException:
+        shutil.rmtree(temp, ignore_errors=True)
+        raise
+    return out
