@@ -189,7 +189,8 @@ def create_array(
             fill_value=0,
             config={"write_empty_chunks": True},
         )
-    maxshape = (None, *shape[1:]) if resizable else shape
+    # HDF5 refuses a chunk larger than a fixed shape, so an empty array must be resizable too.
+    maxshape = (None, *shape[1:]) if (resizable or (shape and shape[0] == 0)) else shape
     return root.create_dataset(
         path, shape=shape, dtype=dtype, chunks=chunks, maxshape=maxshape, **_HDF5_COMPRESSION[kind]
     )

@@ -402,11 +402,13 @@ class SceneWriter:
 
     # -- finishing -----------------------------------------------------------
     def _first_sar_timestamps(self) -> np.ndarray | None:
-        names = sorted(path for path in self._streams if path.startswith("sar/"))
+        names = sorted(path for path, stream in self._streams.items() if path.startswith("sar/") and stream.timestamps)
         return np.asarray(self._streams[names[0]].timestamps, dtype=np.int64) if names else None
 
     def _finish_streams(self) -> None:
         for stream in self._streams.values():
+            if not stream.timestamps:
+                continue  # every append to it was rejected
             self._write_small(f"{stream.path}/timestamp_ns", np.asarray(stream.timestamps, dtype=np.int64))
             for name, rows in stream.small.items():
                 self._write_small(f"{stream.path}/{name}", np.stack(rows))
