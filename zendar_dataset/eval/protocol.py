@@ -7,6 +7,7 @@ the exact protocol it was computed under (see docs/evaluation.md).
 from __future__ import annotations
 
 import copy
+import functools
 import importlib.metadata
 from typing import Any
 
@@ -67,6 +68,7 @@ _PROTOCOL: dict[str, Any] = {
 }
 
 
+@functools.cache
 def _evaluator_version() -> str:
     try:
         return importlib.metadata.version("zendar-dataset")
