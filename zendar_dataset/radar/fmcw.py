@@ -31,8 +31,9 @@ _SCALAR_KEYS = (
     "chirp_interval_s",
 )
 _COUNT_KEYS = ("n_samples", "n_chirps")
-CALIBRATION_KEYS = (*_SCALAR_KEYS, *_COUNT_KEYS, "rx_positions_m")
-"""Keys of a radar calibration mapping read by :meth:`FmcwParams.from_calibration`."""
+CALIBRATION_KEYS = ("center_frequency_hz", "bandwidth_hz", "range_bin_m", "doppler_bin_mps", "rx_positions_m")
+"""The radar keys of the format's ``calibration`` attribute (docs/format.md)."""
+_RANGE_BIN_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,45 +157,93 @@ class FmcwParams:
         return int(self.rx_positions_m.shape[0])
 
     @classmethod
-    def from_calibration(cls, calibration: Mapping[str, Any], *, where: str = "radar calibration") -> FmcwParams:
-        """Build parameters from a radar calibration mapping.
+    def from_calibration(
+        cls,
+        calibration: Any,
+        *,
+        n_samples: int,
+        n_chirps: int,
+        sample_rate_hz: float | None = None,
+        where: str = "radar calibration",
+    ) -> FmcwParams:
+        """Parameters of a radar from its format-v1 calibration entry.
+
+        The calibration stores what is needed to read cubes (see
+        :data:`CALIBRATION_KEYS`); the frame size comes from the cube shape
+        ``[R, D, A]`` (``n_samples = R``, ``n_chirps = D``). The chirp interval
+        follows from ``doppler_bin_mps = lambda / (2 D T_c)``. The sample rate
+        is not stored: without ``sample_rate_hz`` the sweep is taken to fill the
+        chirp interval (``f_s = N / T_c``), which only affects the residual video
+        phase and range migration within a chirp.
 
         Parameters
         ----------
-        calibration : Mapping
-            Holds the keys in :data:`CALIBRATION_KEYS` (extra keys are ignored).
+        calibration : Mapping or object
+            The radar's entry (a dict with the format's keys, or a
+            ``RadarCalibration`` with those attributes).
+        n_samples, n_chirps : int
+            Fast-time samples and chirps per frame (the cube's ``R`` and ``D``).
+        sample_rate_hz : float, optional
         where : str
-            Names the source in error messages (e.g. ``"scene_0001/radar_front/calibration"``).
+            Names the source in error messages (e.g. ``"sensors.left"``).
 
         Raises
         ------
         ZendarFormatError
-            Listing every missing or invalid key.
+            Listing every missing or inconsistent value.
         """
-        missing = [f"{where}: missing key {k!r}" for k in CALIBRATION_KEYS if k not in calibration]
-        if missing:
-            raise ZendarFormatError(f"{where}: missing calibration keys", missing)
-        values = {k: calibration[k] for k in CALIBRATION_KEYS}
-        for k in _COUNT_KEYS:
-            # Stores may hand back integral floats or 0-d arrays.
-            v = np.asarray(values[k])
-            if v.ndim == 0 and np.issubdtype(v.dtype, np.number) and float(v) == int(v):
-                values[k] = int(v)
-        for k in _SCALAR_KEYS:
-            v = np.asarray(values[k])
-            if v.ndim == 0 and np.issubdtype(v.dtype, np.number):
-                values[k] = float(v)
+
+        def get(key: str) -> Any:
+            if isinstance(calibration, Mapping):
+                return calibration.get(key)
+            return getattr(calibration, key, None)
+
+        values = {key: get(key) for key in CALIBRATION_KEYS}
+        problems = [f"{where}: missing key {key!r}" for key, value in values.items() if value is None]
+        for key in CALIBRATION_KEYS[:4]:
+            if values[key] is None:
+                continue
+            try:
+                values[key] = float(values[key])
+            except (TypeError, ValueError):
+                problems.append(f"{where}.{key}: expected a positive number, found {values[key]!r}")
+                continue
+            if not (np.isfinite(values[key]) and values[key] > 0):
+                problems.append(f"{where}.{key}: expected a positive number, found {values[key]!r}")
+        if problems:
+            raise ZendarFormatError(f"{where}: invalid radar calibration", problems)
+        expected_bin = SPEED_OF_LIGHT_MPS / (2.0 * values["bandwidth_hz"])
+        if abs(values["range_bin_m"] / expected_bin - 1.0) > _RANGE_BIN_TOLERANCE:
+            problems.append(
+                f"{where}.range_bin_m: {values['range_bin_m']:g} m disagrees with c / (2 bandwidth_hz) = {expected_bin:g} m"
+            )
+        wavelength = SPEED_OF_LIGHT_MPS / values["center_frequency_hz"]
+        chirp_interval_s = wavelength / (2.0 * int(n_chirps) * values["doppler_bin_mps"]) if int(n_chirps) > 0 else 1.0
         try:
-            return cls(**values)
+            params = cls(
+                center_frequency_hz=values["center_frequency_hz"],
+                bandwidth_hz=values["bandwidth_hz"],
+                sample_rate_hz=n_samples / chirp_interval_s if sample_rate_hz is None else sample_rate_hz,
+                n_samples=n_samples,
+                n_chirps=n_chirps,
+                chirp_interval_s=chirp_interval_s,
+                rx_positions_m=values["rx_positions_m"],
+            )
         except ZendarFormatError as err:
-            problems = [f"{where}: {p}" for p in err.problems]
-            raise ZendarFormatError(f"{where}: invalid calibration", problems) from None
+            problems.extend(f"{where}: {p}" for p in err.problems)
+        if problems:
+            raise ZendarFormatError(f"{where}: invalid radar calibration", problems)
+        return params
 
     def to_calibration(self) -> dict[str, Any]:
-        """The calibration mapping read by :meth:`from_calibration` (plain Python and numpy values)."""
-        out: dict[str, Any] = {k: getattr(self, k) for k in (*_SCALAR_KEYS, *_COUNT_KEYS)}
-        out["rx_positions_m"] = np.array(self.rx_positions_m)
-        return out
+        """The format-v1 radar calibration keys (JSON-ready: floats and nested lists)."""
+        return {
+            "center_frequency_hz": self.center_frequency_hz,
+            "bandwidth_hz": self.bandwidth_hz,
+            "range_bin_m": self.range_bin_m,
+            "doppler_bin_mps": self.doppler_bin_mps,
+            "rx_positions_m": self.rx_positions_m.tolist(),
+        }
 
     def uniform_linear_array(self) -> bool:
         """Whether the receivers are equally spaced along one line (what spatial smoothing needs)."""
