@@ -1,0 +1,213 @@
+"""Simulation profiles: the numbers that size a synthetic dataset.
+
+``paper`` follows the paper (512 x 256 x 4 cubes with 18 cm range bins, 2 m
+SAR apertures imaged at 4 cm pixels, a 24 Hz camera, scenes of tens of
+seconds). ``demo`` is what the main command runs on a 2-core laptop and
+``tiny`` is what the tests run; their reductions are listed in
+docs/simulator.md and in each profile's ``reductions``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
+
+
+@dataclass(frozen=True)
+class SimProfile:
+    """Everything that sizes one synthetic scene.
+
+    Attributes
+    ----------
+    name : str
+        ``"tiny"``, ``"demo"`` or ``"paper"``.
+    scene_duration_s : float
+        Length of each scene (all streams), seconds.
+    default_scenes : int
+        Scenes written when the caller does not say.
+    n_range_bins, n_doppler_bins, n_rx : int
+        Radar cube shape ``[R, D, A]``; ``R`` is also the number of fast-time samples.
+    range_bin_m : float
+        Range bin spacing ``c / (2 B)``, metres.
+    max_velocity_mps : float
+        Unambiguous radial speed ``lambda / (4 T_c)``; sets the chirp interval.
+    radar_rate_hz : float
+        Cubes per second per radar.
+    sar_pixel_m, sar_shape, sar_aperture_m, sar_rate_hz
+        SAR pixel size (m), image ``(H, W)``, synthetic aperture length (m), images per second.
+    lidar_azimuth_step_deg : float
+        Horizontal angle between lidar firings (VLP-16: 0.2 deg at 10 Hz).
+    camera_shape : tuple of int
+        Camera image ``(H, W)``; ``camera_rate_hz`` its frame rate.
+    n_moving_cars : tuple of int
+        Inclusive range of the number of moving cars per scene.
+    facade_spacing_m : float
+        Spacing of the point scatterers along building facades.
+    """
+
+    name: str
+    scene_duration_s: float
+    default_scenes: int
+    n_range_bins: int
+    n_doppler_bins: int
+    n_rx: int
+    range_bin_m: float
+    max_velocity_mps: float
+    radar_rate_hz: float
+    sar_pixel_m: float
+    sar_shape: tuple[int, int]
+    sar_aperture_m: float
+    sar_rate_hz: float
+    lidar_rate_hz: float
+    lidar_azimuth_step_deg: float
+    camera_rate_hz: float
+    camera_shape: tuple[int, int]
+    n_moving_cars: tuple[int, int]
+    facade_spacing_m: float
+    reductions: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        problems = []
+        for key in ("scene_duration_s", "range_bin_m", "max_velocity_mps", "radar_rate_hz", "sar_pixel_m",
+                    "sar_aperture_m", "sar_rate_hz", "lidar_rate_hz", "lidar_azimuth_step_deg",
+                    "camera_rate_hz", "facade_spacing_m"):
+            value = getattr(self, key)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                problems.append(f"{key} must be a positive number, got {value!r}")
+        for key in ("default_scenes", "n_range_bins", "n_doppler_bins", "n_rx"):
+            value = getattr(self, key)
+            if not (isinstance(value, int) and value >= 1):
+                problems.append(f"{key} must be a positive integer, got {value!r}")
+        low, high = self.n_moving_cars
+        if not 0 <= low <= high:
+            problems.append(f"n_moving_cars must be (low, high) with 0 <= low <= high, got {self.n_moving_cars}")
+        if problems:
+            raise ZendarError(f"invalid simulation profile {self.name!r}: " + "; ".join(problems))
+
+    @property
+    def center_frequency_hz(self) -> float:
+        return 77.0e9
+
+    @property
+    def bandwidth_hz(self) -> float:
+        """Swept bandwidth that gives ``range_bin_m``, ``c / (2 * range_bin_m)``."""
+        return SPEED_OF_LIGHT_MPS / (2.0 * self.range_bin_m)
+
+    @property
+    def chirp_interval_s(self) -> float:
+        """``T_c = lambda / (4 v_max)``."""
+        return SPEED_OF_LIGHT_MPS / self.center_frequency_hz / (4.0 * self.max_velocity_mps)
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Fast-time rate that fills 85 % of the chirp interval with the ADC window."""
+        return self.n_range_bins / (0.85 * self.chirp_interval_s)
+
+    def to_json(self) -> dict:
+        """Plain-JSON description (recorded in dataset.json for resumable runs)."""
+        out = asdict(self)
+        out["sar_shape"] = list(self.sar_shape)
+        out["camera_shape"] = list(self.camera_shape)
+        out["n_moving_cars"] = list(self.n_moving_cars)
+        out["reductions"] = list(self.reductions)
+        return out
+
+
+PROFILES: dict[str, SimProfile] = {
+    "paper": SimProfile(
+        name="paper",
+        scene_duration_s=30.0,
+        default_scenes=27,
+        n_range_bins=512,
+        n_doppler_bins=256,
+        n_rx=4,
+        range_bin_m=0.18,
+        max_velocity_mps=20.0,
+        radar_rate_hz=10.0,
+        sar_pixel_m=0.04,
+        sar_shape=(768, 768),
+        sar_aperture_m=2.0,
+        sar_rate_hz=10.0,
+        lidar_rate_hz=10.0,
+        lidar_azimuth_step_deg=0.2,
+        camera_rate_hz=24.0,
+        camera_shape=(480, 640),
+        n_moving_cars=(5, 15),
+        facade_spacing_m=0.15,
+    ),
+    "demo": SimProfile(
+        name="demo",
+        scene_duration_s=6.0,
+        default_scenes=5,
+        n_range_bins=256,
+        n_doppler_bins=64,
+        n_rx=4,
+        range_bin_m=0.36,
+        max_velocity_mps=20.0,
+        radar_rate_hz=10.0,
+        sar_pixel_m=0.16,
+        sar_shape=(192, 192),
+        sar_aperture_m=0.25,
+        sar_rate_hz=10.0,
+        lidar_rate_hz=10.0,
+        lidar_azimuth_step_deg=0.4,
+        camera_rate_hz=12.0,
+        camera_shape=(180, 320),
+        n_moving_cars=(5, 10),
+        facade_spacing_m=0.4,
+        reductions=(
+            "256 range bins of 0.36 m (same 92 m reach) instead of 512 of 0.18 m",
+            "64 Doppler bins instead of 256",
+            "SAR pixels of 16 cm over 31 m, from 0.25 m apertures (resolution matched to the pixel)",
+            "lidar firing every 0.4 deg instead of 0.2 deg",
+            "camera 320 x 180 at 12 Hz",
+            "6 s scenes, 5 to 10 moving cars",
+        ),
+    ),
+    "tiny": SimProfile(
+        name="tiny",
+        scene_duration_s=1.0,
+        default_scenes=3,
+        n_range_bins=64,
+        n_doppler_bins=32,
+        n_rx=4,
+        range_bin_m=0.6,
+        max_velocity_mps=20.0,
+        radar_rate_hz=10.0,
+        sar_pixel_m=0.4,
+        sar_shape=(48, 48),
+        sar_aperture_m=0.1,
+        sar_rate_hz=10.0,
+        lidar_rate_hz=10.0,
+        lidar_azimuth_step_deg=2.0,
+        camera_rate_hz=12.0,
+        camera_shape=(48, 64),
+        n_moving_cars=(3, 5),
+        facade_spacing_m=1.0,
+        reductions=(
+            "64 x 32 x 4 cubes with 0.6 m range bins",
+            "SAR pixels of 40 cm over 19 m, from 0.1 m apertures",
+            "lidar firing every 2 deg, camera 64 x 48 at 12 Hz",
+            "1 s scenes, 3 to 5 moving cars",
+        ),
+    ),
+}
+
+
+def get_profile(name: str | SimProfile) -> SimProfile:
+    """The profile called ``name`` (a :class:`SimProfile` is returned as is).
+
+    Raises
+    ------
+    ZendarError
+        For an unknown name, listing the known ones.
+    """
+    if isinstance(name, SimProfile):
+        return name
+    try:
+        return PROFILES[name]
+    except KeyError:
+        raise ZendarError(f"unknown simulation profile {name!r}; choose one of {sorted(PROFILES)}") from None
