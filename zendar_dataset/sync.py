@@ -48,11 +48,16 @@ class StreamTimes:
         ``[N]`` int64 GPS ns, strictly increasing.
     window
         0 for nearest matching, ``K >= 1`` for the K latest elements at or before the reference.
+    interpolated
+        The stream is interpolated at the reference time (the tracklog): it is present
+        wherever the reference lies inside its span, and Δt is the nearest sample's.
+        Tolerances do not apply to it.
     """
 
     name: str
     timestamp_ns: np.ndarray
     window: int = 0
+    interpolated: bool = False
 
     def __post_init__(self) -> None:
         t = np.asarray(self.timestamp_ns)
@@ -70,6 +75,8 @@ class StreamTimes:
                 )
         if self.window < 0:
             raise ValueError(f"{self.name}: window must be >= 0, got {self.window}")
+        if self.window and self.interpolated:
+            raise ValueError(f"{self.name}: a stream is either windowed or interpolated")
         object.__setattr__(self, "timestamp_ns", t.astype(np.int64, copy=False))
 
 
@@ -93,13 +100,14 @@ def resolve_tolerances_ns(
         For a negative tolerance or a dict key that names no stream (a typo would
         otherwise silently fall back to the default).
     """
-    names = [s.name for s in streams]
+    names = [s.name for s in streams if not s.interpolated]
     groups = {name.split("/", 1)[0] for name in names}
     if isinstance(tolerance_ms, Mapping):
         unknown = sorted(k for k in tolerance_ms if k not in names and k not in groups)
         if unknown:
             raise ValueError(
-                f"tolerance_ms names unknown streams {unknown}; known: {sorted(set(names) | groups)}"
+                f"tolerance_ms names streams {unknown} that are not matched by tolerance here; "
+                f"known: {sorted(set(names) | groups)} (the tracklog is interpolated, not matched)"
             )
         values = list(tolerance_ms.values())
     elif tolerance_ms is None:
@@ -115,6 +123,8 @@ def resolve_tolerances_ns(
     reference_interval = median_interval_ns(reference_ns)
     tolerances: dict[str, int] = {}
     for stream in streams:
+        if stream.interpolated:
+            continue
         chosen: float | None = None
         if isinstance(tolerance_ms, Mapping):
             group = stream.name.split("/", 1)[0]
@@ -139,6 +149,15 @@ def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int)
     right = pd.DataFrame({"timestamp_ns": stream_ns, "element": np.arange(stream_ns.size, dtype=np.int64)})
     merged = pd.merge_asof(left, right, on="timestamp_ns", direction="nearest", tolerance=tolerance_ns)
     return merged["element"].fillna(MISSING).to_numpy(dtype=np.int64)
+
+
+def _inside_span(reference_ns: np.ndarray, stream_ns: np.ndarray) -> np.ndarray:
+    """Nearest sample (any distance) where the reference lies inside the stream's span, else MISSING."""
+    if stream_ns.size == 0:
+        return np.full(reference_ns.shape, MISSING, dtype=np.int64)
+    idx = _nearest(reference_ns, stream_ns, int(stream_ns[-1] - stream_ns[0]) + 1)
+    inside = (reference_ns >= stream_ns[0]) & (reference_ns <= stream_ns[-1])
+    return np.where(inside, idx, MISSING).astype(np.int64)
 
 
 def _latest(reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolerance_ns: int) -> np.ndarray:
@@ -171,7 +190,7 @@ class SyncTable:
     dt_ns
         Per stream ``[N]`` int64 ``element time − reference time``; 0 where ``element == -1``.
     tolerance_ns
-        Per stream tolerance that was applied.
+        Per stream tolerance that was applied (absent for interpolated streams).
     window
         Per stream window length (0 = nearest).
     dropped
@@ -229,7 +248,7 @@ class SyncTable:
                 {
                     "stream": name,
                     "window": self.window[name],
-                    "tolerance_ms": self.tolerance_ns[name] / 1e6,
+                    "tolerance_ms": self.tolerance_ns[name] / 1e6 if name in self.tolerance_ns else np.nan,
                     "items": len(self),
                     "matched": int(present.sum()),
                     "missing": int((~present).sum()),
@@ -251,6 +270,7 @@ def build_sync_table(
     tolerance_ms: float | Mapping[str, float] | None = None,
     require: Iterable[str] = (),
     keep_unfilled_windows: bool = False,
+    absent_groups: Iterable[str] = (),
 ) -> SyncTable:
     """Match every stream to every reference frame.
 
@@ -268,6 +288,9 @@ def build_sync_table(
     keep_unfilled_windows
         Keep frames whose window cannot be filled (the stream is then missing for
         them) instead of dropping them.
+    absent_groups
+        Requested groups with no stream in this scene; requiring one drops every
+        frame (counted under the group's name).
 
     Returns
     -------
@@ -282,8 +305,12 @@ def build_sync_table(
 
     required: set[str] = set()
     groups = {name.split("/", 1)[0] for name in names}
+    absent_groups = set(absent_groups)
+    absent_required = []
     for key in require:
-        if key in names:
+        if key in absent_groups:
+            absent_required.append(key)
+        elif key in names:
             required.add(key)
         elif key in groups:
             required.update(n for n in names if n.split("/", 1)[0] == key)
@@ -294,11 +321,12 @@ def build_sync_table(
     keep = np.ones(reference_ns.shape, dtype=bool)
     lacking: dict[str, np.ndarray] = {}
     for stream in streams:
-        tol = tolerances[stream.name]
-        if stream.window:
-            idx = _latest(reference_ns, stream.timestamp_ns, stream.window, tol)
+        if stream.interpolated:
+            idx = _inside_span(reference_ns, stream.timestamp_ns)
+        elif stream.window:
+            idx = _latest(reference_ns, stream.timestamp_ns, stream.window, tolerances[stream.name])
         else:
-            idx = _nearest(reference_ns, stream.timestamp_ns, tol)
+            idx = _nearest(reference_ns, stream.timestamp_ns, tolerances[stream.name])
         element[stream.name] = idx
         must_have = stream.name in required or (stream.window and not keep_unfilled_windows)
         if must_have:
@@ -308,6 +336,9 @@ def build_sync_table(
     dropped = {name: 0 for name in names}
     for name, miss in lacking.items():
         dropped[name] = int(miss.sum())
+    for group in absent_required:
+        keep[:] = False
+        dropped[group] = int(reference_ns.size)
 
     kept = np.flatnonzero(keep)
     kept_ns = reference_ns[kept]
@@ -330,4 +361,114 @@ def build_sync_table(
         dropped=dropped,
         dropped_total=int(reference_ns.size - kept.size),
         n_reference=int(reference_ns.size),
+    )
+
+
+# -- from a scene store --------------------------------------------------------
+
+STREAM_GROUPS = ("radar", "sar", "camera", "lidar", "tracklog", "labels")
+SENSOR_GROUPS = ("radar", "sar", "camera", "lidar")
+
+
+def resolve_reference(reader, reference: str) -> str:
+    """The reference stream of a scene: ``"sar"`` is its first SAR sensor in name order,
+    ``"<group>/<sensor>"`` a given one (any sensor stream, or ``"tracklog"``)."""
+    scene = reader.scene_id
+    if reference == "tracklog":
+        if "tracklog" not in reader.streams:
+            raise ZendarFormatError(f"{scene}: reference 'tracklog': the scene has no tracklog")
+        return reference
+    group, _, sensor = reference.partition("/")
+    if group not in SENSOR_GROUPS:
+        raise ValueError(
+            f"reference must be 'sar', 'sar/<name>', another '<group>[/<sensor>]' of {SENSOR_GROUPS} "
+            f"or 'tracklog'; got {reference!r}"
+        )
+    sensors = reader.sensors(group)
+    if not sensor:
+        if not sensors:
+            raise ZendarFormatError(f"{scene}: reference {reference!r}: the scene has no {group} stream")
+        return f"{group}/{sensors[0]}"
+    if sensor not in sensors:
+        raise ZendarFormatError(
+            f"{scene}: reference {reference!r}: no such stream; the scene's {group} sensors are {sensors}"
+        )
+    return reference
+
+
+def scene_stream_names(reader, streams: Iterable[str]) -> tuple[list[str], list[str]]:
+    """Expand requested groups/streams into this scene's stream names.
+
+    Returns ``(names, absent_groups)``: ``"tracklog"`` and ``"labels"`` always appear
+    (empty when the scene lacks them); a sensor group with no sensor in the scene is absent.
+    """
+    names: list[str] = []
+    absent: list[str] = []
+    for key in streams:
+        group, _, sensor = key.partition("/")
+        if group in ("tracklog", "labels"):
+            names.append(group)
+        elif sensor:
+            if sensor not in reader.sensors(group):
+                raise ZendarFormatError(
+                    f"{reader.scene_id}: stream {key!r} not found; the scene's {group} sensors are "
+                    f"{reader.sensors(group)}"
+                )
+            names.append(key)
+        else:
+            found = [f"{group}/{s}" for s in reader.sensors(group)]
+            if not found:
+                absent.append(group)
+            names.extend(found)
+    return list(dict.fromkeys(names)), absent
+
+
+def scene_sync_table(
+    reader,
+    streams: Iterable[str],
+    reference: str = "sar",
+    cube_window: int = 1,
+    tolerance_ms: float | Mapping[str, float] | None = None,
+    require: Iterable[str] = (),
+    keep_unfilled_windows: bool = False,
+) -> SyncTable:
+    """The synchronisation index of one scene read through a ``SceneReader``.
+
+    Reads only timestamp arrays. Label frames are the scene's first SAR stream's
+    frames (format v1); the ``"labels"`` stream matches the nearest of them.
+    """
+    reference_name = resolve_reference(reader, reference)
+    names, absent = scene_stream_names(reader, streams)
+    timestamps = {}
+    for name in names:
+        if name == "labels":
+            sar = reader.sensors("sar")
+            has_labels = "labels/moving_cars" in reader.streams and sar
+            timestamps[name] = reader.timestamps(f"sar/{sar[0]}") if has_labels else np.zeros(0, np.int64)
+        elif name == "tracklog" and "tracklog" not in reader.streams:
+            timestamps[name] = np.zeros(0, np.int64)
+        else:
+            timestamps[name] = reader.timestamps(name)
+    stream_times = [
+        StreamTimes(
+            name,
+            timestamps[name],
+            window=cube_window if name.startswith("radar/") else 0,
+            interpolated=name == "tracklog",
+        )
+        for name in names
+    ]
+    if isinstance(tolerance_ms, Mapping):
+        # Keys were checked against the requested streams by the caller; a sensor
+        # this scene lacks is simply not matched here.
+        matched = {n for n in names if n != "tracklog"}
+        matched |= {n.split("/", 1)[0] for n in matched}
+        tolerance_ms = {k: v for k, v in tolerance_ms.items() if k in matched}
+    return build_sync_table(
+        StreamTimes(reference_name, reader.timestamps(reference_name)),
+        stream_times,
+        tolerance_ms=tolerance_ms,
+        require=require,
+        keep_unfilled_windows=keep_unfilled_windows,
+        absent_groups=absent,
     )

@@ -1,0 +1,442 @@
+"""``ZendarDataset``: one item per reference frame, every stream synchronised by GPS time.
+
+>>> ds = ZendarDataset("path/to/root", split="train",
+...                    streams=("radar", "sar", "tracklog", "labels"),
+...                    reference="sar", cube_window=2)          # doctest: +SKIP
+>>> item = ds[0]                                                # doctest: +SKIP
+>>> item["radar"]["left"]["cube"].shape     # [K, R, D, A]        doctest: +SKIP
+>>> item["sync"]["radar/left"]              # Δt ns of the latest cube   doctest: +SKIP
+
+Construction reads ``dataset.json``, scene attributes and timestamp arrays only;
+an item reads the chunks it needs (a radar window is one contiguous slice).
+Scene stores are opened lazily in each process, so DataLoader workers work
+under both the fork and spawn start methods.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from torch.utils.data import Dataset
+
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.format import SceneReader, frame_id, open_dataset
+from zendar_dataset.format.schema import LABEL_FIELD_NAMES
+from zendar_dataset.geometry import LocalENU, PoseInterpolator
+from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
+from zendar_dataset.sync import (
+    MISSING,
+    SENSOR_GROUPS,
+    STREAM_GROUPS,
+    SyncTable,
+    scene_sync_table,
+)
+
+DEFAULT_STREAMS = ("radar", "sar", "tracklog", "camera", "lidar", "labels")
+SAR_FRAME_ARRAYS = ("origin_ecef", "di_ecef", "dj_ecef", "aperture_ns")
+# Paths whose arrays vary in length between items: collate keeps them as lists.
+VARIABLE_LENGTH_GROUPS = ("lidar", "labels")
+
+
+def _check_streams(streams: Iterable[str]) -> tuple[str, ...]:
+    if isinstance(streams, str):
+        streams = (streams,)
+    out = []
+    for key in streams:
+        group, _, sensor = str(key).partition("/")
+        if group not in STREAM_GROUPS or (sensor and group not in SENSOR_GROUPS):
+            raise ValueError(
+                f"streams: {key!r} is not a stream; expected groups {STREAM_GROUPS} "
+                f"or '<group>/<sensor>' for {SENSOR_GROUPS}"
+            )
+        out.append(str(key))
+    if not out:
+        raise ValueError(f"streams: expected at least one of {STREAM_GROUPS}")
+    return tuple(dict.fromkeys(out))
+
+
+def _check_keys(keys: Iterable[str], streams: Sequence[str], what: str) -> None:
+    """Every key of ``require``/``tolerance_ms`` must name a requested group or stream."""
+    groups = {s.partition("/")[0] for s in streams}
+    whole_groups = {s for s in streams if "/" not in s}
+    unknown = [k for k in keys if k not in streams and k not in groups and k.partition("/")[0] not in whole_groups]
+    if unknown:
+        raise ValueError(f"{what} names {unknown}, which are not among the requested streams {list(streams)}")
+
+
+class _SceneState:
+    """What one process caches about one scene: poses, labels, SAR geometry."""
+
+    def __init__(self) -> None:
+        self.poses: EgoPoses | None = None
+        self.tracklog: PoseInterpolator | None = None
+        self.labels: dict[str, np.ndarray] | None = None
+        self.label_times: np.ndarray | None = None
+        self.sar_frames: dict[str, dict[str, np.ndarray]] = {}
+
+
+class ZendarDataset(Dataset):
+    """The Zendar dataset as a map-style torch ``Dataset``: one item per reference frame.
+
+    Parameters
+    ----------
+    root
+        Dataset root (directory or fsspec URL such as ``s3://bucket/zendar``).
+    split
+        A split of ``dataset.json`` (``"train"``, ``"val"``, ``"test"``).
+    streams
+        Groups (``"radar"``, ``"sar"``, ``"camera"``, ``"lidar"``, ``"tracklog"``,
+        ``"labels"``) or single sensor streams (``"camera/front"``) to load.
+    reference
+        The stream giving one item per frame: ``"sar"`` is each scene's first SAR
+        sensor in name order, ``"sar/<name>"`` a given one; any other sensor stream
+        or ``"tracklog"`` works too.
+    tolerance_ms
+        Matching tolerance: None for the defaults (half a stream's median frame
+        interval; 1.5 intervals for radar windows), one number for all streams, or
+        a dict keyed by ``"<group>/<sensor>"`` or ``"<group>"``. ``|Δt| <= tolerance``
+        matches (inclusive).
+    cube_window
+        K: each radar contributes its K latest cubes with ``timestamp_ns <=`` the
+        reference time, ``[K, R, D, A]``. Items whose window cannot be filled are left
+        out and counted in :meth:`sync_report` (unless ``keep_unfilled_windows``).
+    require
+        Groups or streams that must be present; items missing one are left out and counted.
+    transforms
+        Callable applied to each item (a dict) before it is returned.
+    storage_options
+        fsspec options for remote roots (e.g. ``{"endpoint_url": ..., "anon": True}``).
+    keep_unfilled_windows
+        Keep items whose radar window cannot be filled, with that radar set to None.
+
+    Notes
+    -----
+    An item is a dict with ``frame_id`` (``"<scene_id>/<timestamp_ns>"``),
+    ``scene_id``, ``timestamp_ns`` (int, the reference frame's), one dict per
+    requested sensor group keyed by sensor name (None where nothing matched),
+    ``labels`` (field name -> 1-D array; empty arrays for a frame without cars;
+    None for a scene whose labels are withheld), ``sync`` (``"<group>/<sensor>"``
+    -> Δt = element − reference in ns, or None) and, with the tracklog,
+    ``ecef_T_ego`` / ``enu_T_ego`` ([4, 4] float64 at the reference time).
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike,
+        split: str = "train",
+        streams: Iterable[str] = DEFAULT_STREAMS,
+        reference: str = "sar",
+        tolerance_ms: float | Mapping[str, float] | None = None,
+        cube_window: int = 1,
+        require: Iterable[str] = (),
+        transforms: Callable[[dict], Any] | None = None,
+        storage_options: dict | None = None,
+        keep_unfilled_windows: bool = False,
+    ) -> None:
+        self.streams = _check_streams(streams)
+        if isinstance(require, str):
+            require = (require,)
+        self.require = tuple(require)
+        _check_keys(self.require, self.streams, "require")
+        if isinstance(tolerance_ms, Mapping):
+            _check_keys(tolerance_ms, self.streams, "tolerance_ms")
+        if isinstance(cube_window, bool) or not isinstance(cube_window, (int, np.integer)) or cube_window < 1:
+            raise ValueError(f"cube_window must be an integer >= 1, got {cube_window!r}")
+        if transforms is not None and not callable(transforms):
+            raise ValueError(f"transforms must be callable, got {type(transforms).__name__}")
+        self.root = os.fspath(root)
+        self.split = split
+        self.reference = reference
+        self.tolerance_ms = tolerance_ms
+        self.cube_window = int(cube_window)
+        self.transforms = transforms
+        self.storage_options = dict(storage_options or {})
+        self.keep_unfilled_windows = keep_unfilled_windows
+
+        index = open_dataset(self.root, self.storage_options)
+        self.dataset_name = index.name
+        self.scene_ids: list[str] = index.scene_ids(split)
+        self._readers: list[SceneReader] = []
+        self._tables: list[SyncTable] = []
+        for scene_id in self.scene_ids:
+            reader = index.open_scene(scene_id)
+            try:
+                self._check_scene(reader)
+                self._tables.append(
+                    scene_sync_table(
+                        reader,
+                        self.streams,
+                        reference=reference,
+                        cube_window=self.cube_window,
+                        tolerance_ms=tolerance_ms,
+                        require=self.require,
+                        keep_unfilled_windows=keep_unfilled_windows,
+                    )
+                )
+            finally:
+                # Handles reopen on first use, in whichever process reads items.
+                reader.close()
+            self._readers.append(reader)
+        self._offsets = np.concatenate([[0], np.cumsum([len(t) for t in self._tables])]).astype(np.int64)
+        self._state: dict[int, _SceneState] = {}
+        self._state_pid = os.getpid()
+
+    def _check_scene(self, reader: SceneReader) -> None:
+        if ("tracklog" in self.streams and "tracklog" in reader.streams
+                and "imu" not in reader.calibration.sensors):
+            raise ZendarFormatError(
+                f"{reader.scene_id}: calibration: expected an 'imu' entry (ego_T_imu) for the tracklog"
+            )
+
+    # -- pickling: drop per-process caches ------------------------------------
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_state"] = {}
+        return state
+
+    # -- torchvision-style basics ---------------------------------------------
+    def __len__(self) -> int:
+        return int(self._offsets[-1])
+
+    def __repr__(self) -> str:
+        lines = [
+            f"{type(self).__name__}(",
+            f"    root={self.root!r},",
+            f"    split={self.split!r}, scenes={len(self.scene_ids)}, size={len(self)},",
+            f"    streams={list(self.streams)},",
+            f"    reference={self.reference!r}, cube_window={self.cube_window}, "
+            f"tolerance_ms={self.tolerance_ms!r}, require={list(self.require)},",
+            ")",
+        ]
+        return "\n".join(lines)
+
+    def scene_ranges(self) -> list[tuple[str, int, int]]:
+        """``(scene_id, start, stop)`` of each scene's items (used by the samplers)."""
+        return [
+            (scene_id, int(self._offsets[k]), int(self._offsets[k + 1]))
+            for k, scene_id in enumerate(self.scene_ids)
+        ]
+
+    def sync_table(self, scene_id: str) -> SyncTable:
+        """The synchronisation index of one scene of this split."""
+        try:
+            return self._tables[self.scene_ids.index(scene_id)]
+        except ValueError:
+            raise ZendarFormatError(
+                f"scene {scene_id!r} is not in split {self.split!r} (scenes: {self.scene_ids})"
+            ) from None
+
+    def scene_reader(self, scene_id: str) -> SceneReader:
+        """The scene's reader (calibration, ENU origin, raw arrays)."""
+        self.sync_table(scene_id)
+        return self._readers[self.scene_ids.index(scene_id)]
+
+    def sync_report(self) -> pd.DataFrame:
+        """Residuals and drops per scene and stream.
+
+        Columns: ``scene_id``, ``reference``, ``reference_frames`` (frames of the
+        reference stream), ``items`` (kept), ``stream``, ``window``, ``tolerance_ms``,
+        ``matched``, ``missing`` (kept items without this stream), ``dropped``
+        (frames left out because of this stream), ``dt_mean_ns``, ``dt_min_ns``,
+        ``dt_max_ns``, ``abs_dt_median_ns``, ``abs_dt_p95_ns``, ``abs_dt_max_ns``
+        (Δt = element − reference; for windows, the latest element).
+        """
+        frames = []
+        for scene_id, table in zip(self.scene_ids, self._tables):
+            stats = table.residual_stats()
+            extra = [g for g in table.dropped if g not in set(stats["stream"])]
+            if extra:
+                absent = pd.DataFrame(
+                    [{"stream": g, "items": len(table), "matched": 0, "missing": len(table),
+                      "dropped": table.dropped[g]} for g in extra]
+                )
+                stats = pd.concat([stats, absent], ignore_index=True)
+            stats.insert(0, "scene_id", scene_id)
+            stats.insert(1, "reference", table.reference)
+            stats.insert(2, "reference_frames", table.n_reference)
+            frames.append(stats)
+        if not frames:
+            return pd.DataFrame(columns=["scene_id", "reference", "reference_frames", "stream"])
+        return pd.concat(frames, ignore_index=True)
+
+    # -- items ------------------------------------------------------------------
+    def _locate(self, index: int) -> tuple[int, int]:
+        n = len(self)
+        if isinstance(index, (bool, np.bool_)) or not isinstance(index, (int, np.integer)):
+            raise TypeError(f"index must be an integer, got {type(index).__name__}")
+        if not -n <= index < n:
+            raise IndexError(f"index {index} out of range for {n} items")
+        index = int(index) % n
+        scene = int(np.searchsorted(self._offsets, index, side="right") - 1)
+        return scene, index - int(self._offsets[scene])
+
+    def _scene_state(self, scene: int) -> _SceneState:
+        if self._state_pid != os.getpid():
+            # A forked worker inherits the parent's caches; they are safe to reuse
+            # (plain arrays) but keep ownership per process for clarity.
+            self._state = {}
+            self._state_pid = os.getpid()
+        if scene not in self._state:
+            self._state[scene] = _SceneState()
+        return self._state[scene]
+
+    def _poses(self, scene: int) -> EgoPoses:
+        state = self._scene_state(scene)
+        if state.poses is None:
+            reader = self._readers[scene]
+            state.tracklog = PoseInterpolator(
+                reader.timestamps("tracklog"),
+                reader.array("tracklog/position_ecef")[...],
+                reader.array("tracklog/attitude_wxyz")[...],
+            )
+            origin = reader.enu_origin
+            state.poses = EgoPoses(
+                state.tracklog,
+                ego_T_sensor(reader.calibration.sensors["imu"]),
+                LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"]),
+            )
+        return state.poses
+
+    def _labels_at(self, scene: int, timestamp_ns: int) -> dict[str, np.ndarray]:
+        state = self._scene_state(scene)
+        if state.labels is None:
+            labels = self._readers[scene].labels()
+            order = np.argsort(labels["timestamp_ns"], kind="stable")
+            state.labels = {name: np.asarray(labels[name])[order] for name in LABEL_FIELD_NAMES}
+            state.label_times = state.labels["timestamp_ns"]
+        lo, hi = np.searchsorted(state.label_times, [timestamp_ns, timestamp_ns + 1])
+        return {name: values[lo:hi].copy() for name, values in state.labels.items()}
+
+    def _sar_frame(self, scene: int, sensor: str, element: int) -> dict[str, np.ndarray]:
+        state = self._scene_state(scene)
+        if sensor not in state.sar_frames:
+            reader = self._readers[scene]
+            state.sar_frames[sensor] = {
+                name: reader.array(f"sar/{sensor}/{name}")[...] for name in SAR_FRAME_ARRAYS
+            }
+        return {name: values[element].copy() for name, values in state.sar_frames[sensor].items()}
+
+    def __getitem__(self, index: int) -> Any:
+        scene, row = self._locate(index)
+        reader = self._readers[scene]
+        table = self._tables[scene]
+        timestamp_ns = int(table.timestamp_ns[row])
+        item: dict[str, Any] = {
+            "frame_id": frame_id(reader.scene_id, timestamp_ns),
+            "scene_id": reader.scene_id,
+            "timestamp_ns": timestamp_ns,
+            "reference": table.reference,
+        }
+        sync: dict[str, int | None] = {}
+        for name in table.streams:
+            element = int(table.element[name][row])
+            present = element != MISSING
+            sync[name] = int(table.dt_ns[name][row]) if present else None
+            group, _, sensor = name.partition("/")
+            if group in SENSOR_GROUPS:
+                item.setdefault(group, {})[sensor] = (
+                    self._read_sensor(scene, group, sensor, element) if present else None
+                )
+            elif group == "tracklog":
+                self._add_poses(item, scene, timestamp_ns, present)
+            elif group == "labels":
+                label_time = int(table.timestamp_ns[row] + table.dt_ns[name][row])
+                item["labels"] = self._labels_at(scene, label_time) if present else None
+                if present:
+                    item["label_timestamp_ns"] = label_time
+        for group in self.streams:
+            if group in SENSOR_GROUPS:
+                item.setdefault(group, {})
+        item["sync"] = sync
+        return self.transforms(item) if self.transforms is not None else item
+
+    def _add_poses(self, item: dict, scene: int, timestamp_ns: int, present: bool) -> None:
+        if not present:
+            item["tracklog"] = None
+            item["ecef_T_ego"] = None
+            item["enu_T_ego"] = None
+            return
+        poses = self._poses(scene)
+        position_ecef, attitude_wxyz = poses.tracklog.at(timestamp_ns)
+        item["tracklog"] = {
+            "timestamp_ns": timestamp_ns,
+            "position_ecef": position_ecef[0],
+            "attitude_wxyz": attitude_wxyz[0],
+        }
+        item["ecef_T_ego"] = poses.ecef_T_ego(timestamp_ns).as_matrix()
+        item["enu_T_ego"] = poses.enu_T_ego(timestamp_ns).as_matrix()
+
+    def _read_sensor(self, scene: int, group: str, sensor: str, element: int) -> dict[str, Any]:
+        reader = self._readers[scene]
+        stream = f"{group}/{sensor}"
+        times = reader.timestamps(stream)
+        if group == "radar":
+            start = element - self.cube_window + 1
+            return {
+                "cube": reader.array(f"{stream}/cube")[start : element + 1],
+                "timestamp_ns": times[start : element + 1].copy(),
+            }
+        out: dict[str, Any] = {"timestamp_ns": int(times[element])}
+        if group == "sar":
+            out["image"] = reader.array(f"{stream}/image")[element]
+            out.update(self._sar_frame(scene, sensor, element))
+        elif group == "camera":
+            out["image"] = reader.array(f"{stream}/image")[element]
+        elif group == "lidar":
+            out["points"] = reader.lidar_points(sensor, element)
+        return out
+
+    # -- batching ----------------------------------------------------------------
+    @staticmethod
+    def collate(batch: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+        """Batch items for a DataLoader.
+
+        Fixed-size arrays (radar cubes, SAR and camera images, poses, timestamps)
+        present in every item are stacked into tensors with a leading batch axis;
+        lidar points and labels stay lists of tensors (their lengths vary). Where
+        any item lacks an element (None), that entry is a list with None in its place.
+        ``sync`` becomes ``{stream: [Δt ns or None, ...]}``; strings stay lists.
+        """
+        if not batch:
+            raise ValueError("collate needs at least one item")
+        return _collate(list(batch), path=())
+
+
+def _to_tensor(value: Any) -> Any:
+    """Arrays to tensors, recursively through mappings; everything else unchanged."""
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(np.ascontiguousarray(value))
+    if isinstance(value, Mapping):
+        return {k: _to_tensor(v) for k, v in value.items()}
+    return value
+
+
+def _collate(values: list[Any], path: tuple[str, ...]) -> Any:
+    first = next((v for v in values if v is not None), None)
+    if first is None:
+        return values
+    if any(v is None for v in values):
+        return [_to_tensor(v) for v in values]
+    if isinstance(first, Mapping):
+        keys = list(first)
+        if path == ("sync",) or any(set(v) != set(keys) for v in values):
+            return {k: [v.get(k) for v in values] for k in dict.fromkeys(k for v in values for k in v)}
+        return {k: _collate([v[k] for v in values], path + (str(k),)) for k in keys}
+    if path and path[0] in VARIABLE_LENGTH_GROUPS:
+        return [_to_tensor(v) for v in values]
+    if isinstance(first, np.ndarray):
+        if all(isinstance(v, np.ndarray) and v.shape == first.shape and v.dtype == first.dtype for v in values):
+            return torch.from_numpy(np.stack(values))
+        return [_to_tensor(v) for v in values]
+    if isinstance(first, (bool, np.bool_)):
+        return values
+    if isinstance(first, (int, np.integer)) and all(isinstance(v, (int, np.integer)) for v in values):
+        return torch.tensor(values, dtype=torch.int64)
+    if isinstance(first, (float, np.floating)) and all(isinstance(v, (int, float, np.number)) for v in values):
+        return torch.tensor(values, dtype=torch.float64)
+    return values
