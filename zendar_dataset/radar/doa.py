@@ -1,0 +1,277 @@
+"""Direction of arrival (azimuth) for small receive arrays, batched over detections.
+
+Snapshots are the complex antenna vectors of a detection: ``[N, A]`` (one
+range-Doppler cell each) or ``[N, K, A]`` (``K`` snapshots each, e.g. the
+detection's neighbouring cells, which carry the same steering vector). The
+steering vector of azimuth ``theta`` (radar frame: x boresight, y left,
+positive to the left) is ``a_a = exp(-j 2 pi u(theta) . p_a / lambda)``,
+``u = (cos theta, sin theta, 0)`` (docs/architecture.md).
+
+Covariance. ``R = mean_k x_k x_k^H`` over the snapshots and, on a uniform
+linear array, over the ``A - L + 1`` subarrays of ``L`` elements (spatial
+smoothing), then forward-backward averaged ``R <- (R + J conj(R) J) / 2`` on a
+centro-symmetric array. A single snapshot gives a rank-one ``R``; Capon and
+MUSIC need more, so by default they smooth with ``L = A - 1`` when ``K < A``
+(with forward-backward averaging a single snapshot then yields rank up to
+``2 (A - L + 1) = 4`` on 4 elements) and use the full array otherwise.
+
+Spectra on the azimuth grid: Bartlett ``a^H R a / L``; Capon (MVDR)
+``1 / a^H (R + delta I)^-1 a`` with diagonal loading ``delta =
+loading * trace(R) / L``; MUSIC ``1 / |E_n^H a|^2`` with ``E_n`` the ``L -
+n_sources`` eigenvectors of the smallest eigenvalues. Peaks are found on a
+coarse grid, then each is refined on a fine grid one coarse step either side
+and finally by a parabola through the three best fine samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+METHODS = ("bartlett", "capon", "music")
+_COARSE_STEP_RAD = np.deg2rad(1.0)
+_FINE_POINTS = 21
+
+
+@dataclass
+class DoaSpectrum:
+    """Spatial spectra on an azimuth grid.
+
+    Attributes
+    ----------
+    grid_rad : numpy.ndarray
+        ``[G]`` azimuths, radians, radar frame.
+    power : numpy.ndarray
+        ``[N, G]`` float64 spectrum per detection (Bartlett/Capon: power;
+        MUSIC: pseudo-spectrum).
+    """
+
+    grid_rad: np.ndarray
+    power: np.ndarray
+
+    def __post_init__(self) -> None:
+        if self.power.ndim != 2 or self.power.shape[1] != self.grid_rad.shape[0]:
+            raise ValueError(f"power must be [N, {self.grid_rad.shape[0]}], got {self.power.shape}")
+
+
+def steering_vectors(azimuth_rad: np.ndarray, rx_positions_m: np.ndarray, wavelength_m: float) -> np.ndarray:
+    """Steering vectors ``[..., A]`` complex128 for azimuths ``[...]`` (radians, zero elevation)."""
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    rx = np.asarray(rx_positions_m, dtype=np.float64)
+    path = np.cos(az)[..., None] * rx[:, 0] + np.sin(az)[..., None] * rx[:, 1]
+    return np.exp(-2j * np.pi * path / float(wavelength_m))
+
+
+def _is_uniform_linear(rx: np.ndarray) -> bool:
+    if rx.shape[0] < 2:
+        return True
+    step = np.diff(rx, axis=0)
+    return bool(np.allclose(step, step[0], atol=1e-9 * max(1.0, float(np.abs(rx).max()))))
+
+
+def _is_centro_symmetric(rx: np.ndarray) -> bool:
+    pair_sum = rx + rx[::-1]
+    return bool(np.allclose(pair_sum, pair_sum[0], atol=1e-9 * max(1.0, float(np.abs(rx).max()))))
+
+
+def spatial_covariance(snapshots: np.ndarray, *, subarray_size: int, forward_backward: bool) -> np.ndarray:
+    """Sample covariance ``[N, L, L]`` with spatial smoothing over subarrays of ``L`` and optional forward-backward averaging.
+
+    ``snapshots`` is ``[N, K, A]``; subarrays are contiguous runs of ``L`` elements
+    (meaningful on a uniform linear array).
+    """
+    n, k, a = snapshots.shape
+    sub = np.lib.stride_tricks.sliding_window_view(snapshots, subarray_size, axis=2)  # [N, K, P, L]
+    sub = sub.reshape(n, -1, subarray_size)
+    cov = np.einsum("nkl,nkm->nlm", sub, sub.conj()) / sub.shape[1]
+    if forward_backward:
+        cov = 0.5 * (cov + cov[:, ::-1, ::-1].conj())
+    return cov
+
+
+def _quadratic_form(matrix: np.ndarray, steer: np.ndarray) -> np.ndarray:
+    """``Re(a^H M a)``: matrix ``[N, L, L]``, steer ``[G, L]`` (shared grid) or ``[N, G, L]`` -> ``[N, G]``."""
+    # a^H M a = sum_l conj(a_l) (M a)_l; batched matmul beats einsum here by ~3x.
+    if steer.ndim == 2:
+        y = steer @ matrix.transpose(0, 2, 1)  # [N, G, L]: row g is (M a_g)^T
+        return (y * steer.conj()).sum(axis=-1).real
+    y = steer @ matrix.transpose(0, 2, 1)
+    return (y * steer.conj()).sum(axis=-1).real
+
+
+def _spectrum_matrix(cov: np.ndarray, method: str, n_sources: int, loading: float) -> np.ndarray:
+    size = cov.shape[-1]
+    if method == "bartlett":
+        return cov / size
+    if method == "capon":
+        delta = loading * np.trace(cov, axis1=1, axis2=2).real / size + np.finfo(np.float64).tiny
+        return np.linalg.inv(cov + delta[:, None, None] * np.eye(size))
+    _, vectors = np.linalg.eigh(cov)  # ascending eigenvalues
+    noise = vectors[:, :, : size - n_sources]
+    return noise @ noise.conj().transpose(0, 2, 1)
+
+
+def _spectrum(matrix: np.ndarray, steer: np.ndarray, method: str) -> np.ndarray:
+    q = _quadratic_form(matrix, steer)
+    if method == "bartlett":
+        return q
+    return 1.0 / np.maximum(q, 1e-300)
+
+
+def _coarse_peaks(power: np.ndarray, n_sources: int) -> np.ndarray:
+    """Indices ``[N, S]`` of the ``S`` highest local maxima (``-1`` where fewer exist)."""
+    n, g = power.shape
+    if n_sources == 1:
+        return np.argmax(power, axis=1)[:, None]
+    left = np.concatenate([np.full((n, 1), -np.inf), power[:, :-1]], axis=1)
+    right = np.concatenate([power[:, 1:], np.full((n, 1), -np.inf)], axis=1)
+    peak_power = np.where((power >= left) & (power > right), power, -np.inf)
+    order = np.argsort(-peak_power, axis=1)[:, :n_sources]
+    found = np.take_along_axis(peak_power, order, axis=1) > -np.inf
+    return np.where(found, order, -1)
+
+
+def estimate_azimuth(
+    snapshots: np.ndarray,
+    rx_positions_m: np.ndarray,
+    wavelength_m: float,
+    *,
+    method: str = "bartlett",
+    n_sources: int = 1,
+    forward_backward: bool = True,
+    subarray_size: int | None = None,
+    grid_rad: np.ndarray | None = None,
+    loading: float = 1e-3,
+    return_spectrum: bool = False,
+) -> Any:
+    """Azimuth of the strongest source(s) per detection.
+
+    Parameters
+    ----------
+    snapshots : numpy.ndarray
+        ``[N, A]`` or ``[N, K, A]`` complex antenna vectors.
+    rx_positions_m : numpy.ndarray
+        ``[A, 3]`` receive-antenna positions, radar frame, metres.
+    wavelength_m : float
+    method : {"bartlett", "capon", "music"}
+    n_sources : int
+        Sources per detection (MUSIC's signal-subspace size; peaks returned).
+    forward_backward : bool
+        Forward-backward averaging; needs a centro-symmetric array (pass False otherwise).
+    subarray_size : int, optional
+        Spatial-smoothing subarray ``L`` (uniform linear arrays only); default in the module docstring.
+    grid_rad : numpy.ndarray, optional
+        Coarse search grid, default ``-90..90`` degrees in 1-degree steps.
+    loading : float
+        Capon diagonal loading relative to the mean eigenvalue.
+    return_spectrum : bool
+        Also return the :class:`DoaSpectrum` on the coarse grid.
+
+    Returns
+    -------
+    numpy.ndarray or (numpy.ndarray, DoaSpectrum)
+        ``[N]`` azimuth in radians (radar frame) for one source, else
+        ``[N, n_sources]`` ordered by peak strength (NaN where fewer peaks).
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    x = np.asarray(snapshots)
+    if x.ndim == 2:
+        x = x[:, None, :]
+    rx = np.asarray(rx_positions_m, dtype=np.float64)
+    if x.ndim != 3 or rx.ndim != 2 or rx.shape != (x.shape[-1], 3):
+        raise ValueError(
+            f"snapshots must be [N, A] or [N, K, A] and rx_positions_m [A, 3]; got {np.shape(snapshots)} and {rx.shape}"
+        )
+    x = x.astype(np.complex128, copy=False)
+    n_ant = rx.shape[0]
+    n_snap = x.shape[1]
+    uniform = _is_uniform_linear(rx)
+    if subarray_size is None:
+        small = method != "bartlett" and n_snap < n_ant and n_ant >= 3 and uniform
+        subarray_size = n_ant - 1 if small else n_ant
+    if not 1 <= subarray_size <= n_ant:
+        raise ValueError(f"subarray_size must lie in [1, {n_ant}], got {subarray_size}")
+    if subarray_size < n_ant and not uniform:
+        raise ValueError("spatial smoothing (subarray_size < A) needs a uniform linear array")
+    if forward_backward and not _is_centro_symmetric(rx):
+        raise ValueError("forward-backward averaging needs a centro-symmetric array: pass forward_backward=False")
+    if not 1 <= n_sources < max(subarray_size, 2):
+        raise ValueError(f"n_sources must lie in [1, {subarray_size - 1}] for a {subarray_size}-element (sub)array")
+    sub_rx = rx[:subarray_size]
+    grid = np.arange(-90.0, 90.0 + 0.5, 1.0) * np.pi / 180.0 if grid_rad is None else np.asarray(grid_rad, np.float64)
+    if grid.ndim != 1 or grid.size < 3:
+        raise ValueError("grid_rad must be a 1-D array of at least 3 azimuths")
+
+    cov = spatial_covariance(x, subarray_size=subarray_size, forward_backward=forward_backward)
+    matrix = _spectrum_matrix(cov, method, n_sources, loading)
+    coarse = _spectrum(matrix, steering_vectors(grid, sub_rx, wavelength_m), method)
+    peaks = _coarse_peaks(coarse, n_sources)  # [N, S]
+
+    step = float(np.median(np.diff(grid))) if grid.size > 1 else _COARSE_STEP_RAD
+    offsets = np.linspace(-step, step, _FINE_POINTS)
+    centre = grid[np.clip(peaks, 0, grid.size - 1)]  # [N, S]
+    fine_az = centre[:, :, None] + offsets  # [N, S, F]
+    n, s = peaks.shape
+    fine_steer = steering_vectors(fine_az.reshape(n, -1), sub_rx, wavelength_m)  # [N, S*F, L]
+    fine = _spectrum(matrix, fine_steer, method).reshape(n, s, _FINE_POINTS)
+    best = np.clip(np.argmax(fine, axis=2), 1, _FINE_POINTS - 2)
+    y0, y1, y2 = (np.take_along_axis(fine, (best + o)[..., None], axis=2)[..., 0] for o in (-1, 0, 1))
+    curvature = y0 - 2.0 * y1 + y2
+    shift = np.where(curvature < 0, 0.5 * (y0 - y2) / np.where(curvature < 0, curvature, 1.0), 0.0)
+    fine_step = offsets[1] - offsets[0]
+    azimuth = np.take_along_axis(fine_az, best[..., None], axis=2)[..., 0] + np.clip(shift, -1.0, 1.0) * fine_step
+    azimuth = np.where(peaks >= 0, azimuth, np.nan)
+    result = azimuth[:, 0] if n_sources == 1 else azimuth
+    if return_spectrum:
+        return result, DoaSpectrum(grid_rad=grid, power=coarse)
+    return result
+
+
+def _rotation_translation(ego_T_radar: Any) -> tuple[np.ndarray, np.ndarray]:
+    if hasattr(ego_T_radar, "rotation") and hasattr(ego_T_radar, "translation"):
+        rotation, translation = ego_T_radar.rotation, ego_T_radar.translation
+    elif isinstance(ego_T_radar, tuple) and len(ego_T_radar) == 2:
+        rotation, translation = ego_T_radar
+    else:
+        matrix = np.asarray(ego_T_radar, dtype=np.float64)
+        if matrix.shape != (4, 4):
+            raise ValueError("ego_T_radar must be (rotation [3, 3], translation [3]), a [4, 4] matrix or an SE3")
+        rotation, translation = matrix[:3, :3], matrix[:3, 3]
+    rotation = np.asarray(rotation, dtype=np.float64)
+    translation = np.asarray(translation, dtype=np.float64)
+    if rotation.shape != (3, 3) or translation.shape != (3,):
+        raise ValueError(f"ego_T_radar rotation must be [3, 3] and translation [3], got {rotation.shape}, {translation.shape}")
+    return rotation, translation
+
+
+def detections_to_points(
+    range_m: np.ndarray, azimuth_rad: np.ndarray, ego_T_radar: Any, *, elevation_rad: np.ndarray | float = 0.0
+) -> np.ndarray:
+    """Detections (range, azimuth) to points in the ego frame.
+
+    Parameters
+    ----------
+    range_m, azimuth_rad : numpy.ndarray
+        ``[N]`` range (m) and azimuth (rad, radar frame, positive to the left).
+    ego_T_radar : (rotation, translation), [4, 4] array or object with ``rotation``/``translation``
+        Radar pose in the ego frame, ``p_ego = R p_radar + t``.
+    elevation_rad : float or numpy.ndarray
+        Elevation (the array has no elevation resolution, so 0 by default: points
+        lie in the radar's horizontal plane).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``points_ego`` ``[N, 3]`` float64, metres.
+    """
+    rng = np.asarray(range_m, dtype=np.float64)
+    az = np.asarray(azimuth_rad, dtype=np.float64)
+    if rng.shape != az.shape or rng.ndim != 1:
+        raise ValueError(f"range_m and azimuth_rad must both be [N], got {rng.shape} and {az.shape}")
+    el = np.broadcast_to(np.asarray(elevation_rad, dtype=np.float64), rng.shape)
+    rotation, translation = _rotation_translation(ego_T_radar)
+    points_radar = np.stack([rng * np.cos(el) * np.cos(az), rng * np.cos(el) * np.sin(az), rng * np.sin(el)], axis=1)
+    return points_radar @ rotation.T + translation
