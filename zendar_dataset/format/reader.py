@@ -163,6 +163,7 @@ class StoredArray:
         self.raw = array
         self.scene_id = scene_id
         self.path = path
+        self._direct = stores.direct_frame_reader(array)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -183,8 +184,28 @@ class StoredArray:
     def __len__(self) -> int:
         return int(self.raw.shape[0])
 
+    def _frames(self, key: Any) -> tuple[int, int, bool] | None:
+        """(start, stop, squeeze) when ``key`` selects whole frames along axis 0, else None."""
+        if isinstance(key, tuple) and len(key) == 1:
+            key = key[0]
+        n = self.raw.shape[0]
+        if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
+            index = int(key) + n if key < 0 else int(key)
+            if not 0 <= index < n:
+                raise IndexError(f"{self.scene_id}: {self.path}: index {int(key)} out of range for {n} frames")
+            return index, index + 1, True
+        if isinstance(key, slice) and key.step in (None, 1):
+            start, stop, _ = key.indices(n)
+            return start, max(start, stop), False
+        return None
+
     def __getitem__(self, key: Any) -> np.ndarray:
         try:
+            frames = self._frames(key) if self._direct is not None else None
+            if frames is not None:
+                start, stop, squeeze = frames
+                out = self._direct.read(start, stop)
+                return out[0] if squeeze else out
             return self.raw[key]
         except IndexError:
             raise
