@@ -1,0 +1,9 @@
+import pytest
+from radar_helpers import ula_params
+
+from zendar_dataset.radar.fmcw import FmcwParams
+
+
+@pytest.fixture
+def params() -> FmcwParams:
+    return ula_params()
