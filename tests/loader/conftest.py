@@ -134,3 +134,8 @@ def dataset_root(request, tmp_path_factory):
 @pytest.fixture(scope="session")
 def zarr_root(tmp_path_factory):
     return make_dataset(tmp_path_factory.mktemp("ds-zarr-only"), "zarr")
+
+
+@pytest.fixture(scope="session")
+def hdf5_root(tmp_path_factory):
+    return make_dataset(tmp_path_factory.mktemp("ds-hdf5-only"), "hdf5")
