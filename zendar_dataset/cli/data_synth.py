@@ -1,0 +1,56 @@
+"""``zendar-data synth OUT``: write a synthetic format-v1 dataset."""
+
+from __future__ import annotations
+
+import argparse
+
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.sim.profiles import PROFILES
+
+
+def _ratios(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers like 0.6,0.2,0.2, got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three numbers (train,val,test), got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "synth",
+        help="simulate a dataset (radar cubes, SAR, lidar, camera, tracklog, labels)",
+        description="Simulate urban drives and write them as a format-v1 dataset. Re-running into the same OUT "
+        "with the same settings resumes an interrupted run.",
+    )
+    parser.add_argument("out", metavar="OUT", help="dataset root to create (new or empty, or an interrupted run)")
+    parser.add_argument("--profile", choices=sorted(PROFILES), default="demo", help="size of the simulation (default: demo)")
+    parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the profile's)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument("--split-ratios", type=_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
+    parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
+    parser.add_argument("--withhold-test-labels", action="store_true",
+                        help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from zendar_dataset.sim.generate import synthesize_dataset
+
+    if args.scenes is not None and args.scenes < 1:
+        raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
+    out = synthesize_dataset(
+        args.out,
+        profile=args.profile,
+        n_scenes=args.scenes,
+        seed=args.seed,
+        split_ratios=args.split_ratios,
+        backend=args.backend,
+        progress=not args.quiet,
+        withhold_test_labels=args.withhold_test_labels,
+    )
+    print(f"wrote {out}")
+    return 0

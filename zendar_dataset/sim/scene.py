@@ -1,0 +1,245 @@
+"""One synthetic scene, end to end, written through a format-v1 ``SceneWriter``.
+
+Random streams: every stream (world, traffic, ego, tracklog noise, each radar's
+noise and fluctuation, lidar, ...) draws from its own ``numpy.random.Generator``
+seeded by ``(seed, scene_index, stream)``, so a scene's bytes depend on nothing
+else (not on other scenes, the order of work, or the clock).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from zendar_dataset.geometry.geodesy import LocalENU
+from zendar_dataset.geometry.poses import PoseInterpolator
+from zendar_dataset.geometry.quaternion import quat_wxyz_to_matrix
+from zendar_dataset.radar.range_doppler import range_doppler, range_profiles
+from zendar_dataset.sim import camera as camera_model
+from zendar_dataset.sim import ego as ego_model
+from zendar_dataset.sim.labels import label_rows
+from zendar_dataset.sim.lidar import lidar_sweep
+from zendar_dataset.sim.profiles import SimProfile
+from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
+from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m
+from zendar_dataset.sim.traffic import make_traffic
+from zendar_dataset.sim.trajectory import speed_profile
+from zendar_dataset.sim.world import Road, World, build_static_world
+from zendar_dataset.sim.traffic import _road_trajectory
+
+GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
+PAD_S = 1.5
+CUBE_HALF_WIDTH_BINS = 4
+SAR_HALF_WIDTH_BINS = 4
+STREAMS = ("road", "ego", "world", "traffic", "tracklog", "front_left", "front_right", "sar_front_left",
+           "sar_front_right", "lidar", "enu")
+
+
+def stream_rng(seed: int, scene_index: int, stream: str) -> np.random.Generator:
+    """The generator of one random stream of one scene."""
+    return np.random.default_rng([int(seed), int(scene_index), STREAMS.index(stream)])
+
+
+@dataclass
+class SceneTruth:
+    """What was simulated, kept in memory (not written): world, ego trajectory, true tracklog."""
+
+    world: World
+    ego: object
+    tracklog_truth: ego_model.Tracklog
+    tracklog_written: ego_model.Tracklog
+    enu: LocalENU
+    start_ns: int
+
+
+def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
+    """Draw the road, ego drive, world, traffic and tracklogs of one scene."""
+    duration = profile.scene_duration_s
+    rng = stream_rng(seed, scene_index, "road")
+    turn = rng.random() < 0.5
+    turn_start, turn_length = rng.uniform(5.0, 40.0), rng.uniform(15.0, 35.0)
+    turn_kappa = rng.choice([-1.0, 1.0]) / rng.uniform(25.0, 60.0)
+
+    def curvature(s: np.ndarray) -> np.ndarray:
+        return np.where(turn & (s > turn_start) & (s < turn_start + turn_length), turn_kappa, 0.0)
+
+    rng = stream_rng(seed, scene_index, "ego")
+    cruise = float(rng.uniform(5.0, 14.0))
+    stops = [(float(rng.uniform(0.4, 0.6) * duration), float(rng.uniform(0.3, 1.0)))] if rng.random() < 0.3 else []
+    time_s, speed = speed_profile(duration + 2 * PAD_S, cruise, [(s + PAD_S, w) for s, w in stops])
+    time_s = time_s - PAD_S
+    road_end = cruise * (duration + 2 * PAD_S) + 160.0
+    road = Road.from_curvature(-120.0, road_end, curvature)
+    ego = _road_trajectory(road, time_s, speed, -cruise * PAD_S, 0.0, 1.0)
+
+    rng = stream_rng(seed, scene_index, "world")
+    boxes, scatterers = build_static_world(rng, road, -cruise * PAD_S - 40.0, road_end - 40.0, profile.facade_spacing_m)
+    rng = stream_rng(seed, scene_index, "traffic")
+    n_cars = int(rng.integers(profile.n_moving_cars[0], profile.n_moving_cars[1] + 1))
+    cars = make_traffic(rng, road, n_cars, -PAD_S, duration + 2 * PAD_S, -cruise * PAD_S, cruise)
+    world = World(road, boxes, scatterers, cars)
+
+    rng = stream_rng(seed, scene_index, "enu")
+    enu = LocalENU(37.7749 + rng.uniform(-0.05, 0.05), -122.4194 + rng.uniform(-0.05, 0.05), 10.0)
+    start_ns = GPS_EPOCH_START_NS + scene_index * 10**12
+    truth, written = ego_model.make_tracklogs(
+        ego, enu, start_ns, -PAD_S + 0.01, duration + PAD_S - 0.01, stream_rng(seed, scene_index, "tracklog")
+    )
+    return SceneTruth(world, ego, truth, written, enu, start_ns)
+
+
+def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_range_m: float, *, with_velocity: bool = False):
+    """Scatterers within ``max_range_m`` in front of the sensor at the middle of ``t_s`` ``[M]``.
+
+    Returns positions ``[S, M, 3]`` in the sensor frame at every time, their
+    RCS, Swerling-1 flags and phases ``[S]``, and (``with_velocity``) their
+    velocities relative to the sensor ``[S, M, 3]`` in the sensor frame.
+    """
+    m = t_s.shape[0]
+    if with_velocity:
+        # Positions 0.1 ms later give the relative velocity by a finite difference.
+        t_s = np.concatenate([t_s, t_s + 1e-4])
+    rotation, position = ego_model.sensor_poses_enu(truth.ego, sensor, t_s)  # [M, 3, 3], [M, 3]
+    world = truth.world
+    static = world.static_scatterers
+    moving_pos, _vel, moving, _ids = world.moving_scatterers(t_s)
+    mid = m // 2
+    # Cull at the middle time first: transforming every scatterer at every time is the cost.
+    static_mid = (static.position_m - position[mid]) @ rotation[mid]
+    reach = max_range_m + 1.0
+    near = (static_mid[:, 0] > -1.0) & (np.linalg.norm(static_mid, axis=1) < reach)
+    all_pos = np.concatenate([np.broadcast_to(static.position_m[near][:, None, :], (int(near.sum()), t_s.shape[0], 3)), moving_pos])
+    local = np.einsum("mji,smj->smi", rotation, all_pos - position[None])
+    rcs = np.concatenate([static.rcs_m2[near], moving.rcs_m2])
+    swerling1 = np.concatenate([static.swerling1[near], moving.swerling1])
+    phase = np.concatenate([static.phase_rad[near], moving.phase_rad])
+    if with_velocity:
+        return local[:, :m], rcs, swerling1, phase, (local[:, m:] - local[:, :m]) / 1e-4
+    return local, rcs, swerling1, phase
+
+
+def _fluctuation(rng: np.random.Generator, swerling1: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """Per-frame complex factor: Rayleigh amplitude and uniform phase (Swerling 1) or the fixed phase."""
+    n = swerling1.shape[0]
+    gauss = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2.0)
+    return np.where(swerling1, gauss, np.exp(1j * phase))
+
+
+def _visible(local: np.ndarray, max_range_m: float) -> np.ndarray:
+    r = np.linalg.norm(local, axis=-1)
+    return (local[..., 0] > 0.0) & (r < max_range_m) & (r > 0.3)
+
+
+def simulate_cube(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s: float, rng: np.random.Generator) -> np.ndarray:
+    """One range-Doppler cube ``[R, D, A]`` complex64 (signal + thermal noise)."""
+    params = ego_model.radar_params(profile)
+    front_end = RadarFrontEnd()
+    t = t_center_s - params.frame_duration_s / 2 + np.arange(params.n_chirps) * params.chirp_interval_s
+    local, rcs, swerling1, phase = _scatterers_in_sensor(truth, sensor, t, params.max_range_m)
+    mid = local[:, params.n_chirps // 2]
+    keep = _visible(mid, params.max_range_m - CUBE_HALF_WIDTH_BINS * params.range_bin_m)
+    fluctuation = _fluctuation(rng, swerling1, phase)
+    amplitude = front_end.amplitude(params, rcs, mid) * fluctuation
+    # Returns far below the noise of one cube cell add nothing visible; skip them.
+    noise_w = front_end.noise_power_w(params)
+    gain = params.n_samples * params.n_chirps / 4.0
+    keep &= np.abs(amplitude) * gain > 0.01 * np.sqrt(noise_w * gain)
+    cube = synthesize_cube(params, local[keep], amplitude[keep], half_width_bins=CUBE_HALF_WIDTH_BINS)
+    noise = thermal_noise(rng, (params.n_chirps, params.n_samples, params.n_antennas), noise_w)
+    return cube + range_doppler(noise, workers=1)
+
+
+def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s: float, rng: np.random.Generator, tracklog: PoseInterpolator):
+    """One SAR image and its ECEF image model: ``(image [H, W], grid_ecef, aperture (t0, t1) s)``."""
+    params = ego_model.radar_params(profile)
+    front_end = RadarFrontEnd()
+    mount = ego_model.EGO_T_SENSOR[sensor]
+    boresight_from_track = float(np.arctan2(mount.rotation[1, 0], mount.rotation[0, 0]))
+    spacing = nyquist_spacing_m(params.wavelength_m, boresight_from_track)
+    ego = truth.ego
+    distance = np.concatenate([[0.0], np.cumsum(0.5 * (ego.speed_mps[1:] + ego.speed_mps[:-1]) * np.diff(ego.time_s))])
+    t = aperture_times(ego.time_s, distance, t_center_s, profile.sar_aperture_m, spacing, params.chirp_interval_s)
+    geometry = SarGeometry.for_radar(mount.translation, mount.rotation[:, 0], profile.sar_pixel_m, profile.sar_shape)
+    # Keep scatterers that can land in the image (plus the range sidelobes' reach).
+    corners = np.array([[i, j] for i in (-0.5, 0.5) for j in (-0.5, 0.5)]) * np.array(profile.sar_shape) * profile.sar_pixel_m
+    corner_ego = geometry.center_ego[None, :] + np.concatenate([corners, np.zeros((4, 1))], axis=1)
+    corner_sensor = (corner_ego - mount.translation) @ mount.rotation
+    ranges = np.linalg.norm(corner_sensor, axis=1)
+    r_lo, r_hi = 0.0, float(ranges.max()) + 3.0
+    local, rcs, swerling1, phase, velocity = _scatterers_in_sensor(truth, sensor, t, r_hi, with_velocity=True)
+    mid = local[:, local.shape[1] // 2]
+    r_mid = np.linalg.norm(mid, axis=-1)
+    keep = _visible(mid, params.max_range_m - SAR_HALF_WIDTH_BINS * params.range_bin_m) & (r_mid > r_lo) & (r_mid < r_hi)
+    fluctuation = _fluctuation(rng, swerling1, phase)[keep]
+    local, velocity = local[keep], velocity[keep]
+    amplitude = front_end.amplitude(params, rcs[keep][:, None], local) * fluctuation[:, None]  # [S, P]
+    receiver = params.rx_positions_m[0]
+    profiles = synthesize_range_profiles(
+        params, local.transpose(1, 0, 2), velocity.transpose(1, 0, 2), amplitude.T, receiver, half_width_bins=SAR_HALF_WIDTH_BINS
+    )
+    noise = thermal_noise(rng, (t.shape[0], params.n_samples, 1), front_end.noise_power_w(params))
+    profiles = profiles + range_profiles(noise, workers=1)[..., 0]
+    # Backprojection uses the written (noisy) tracklog, in the scene's ENU frame.
+    stamps = truth.start_ns + np.rint(t * 1e9).astype(np.int64)
+    imu_position, imu_attitude = tracklog.at(stamps)
+    enu_r_ecef = truth.enu.ecef_R_enu.T
+    imu_r = enu_r_ecef @ quat_wxyz_to_matrix(imu_attitude)  # [P, 3, 3] IMU -> ENU
+    imu_t = truth.enu.ecef_to_enu(imu_position)
+    ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
+    ego_r = imu_r @ ego_from_imu.rotation.T
+    ego_t = imu_t - np.einsum("pij,j->pi", ego_r, ego_from_imu.translation)
+    phase_center_ego = mount.translation + mount.rotation @ (receiver / 2.0)
+    phase_centers = ego_t + np.einsum("pij,j->pi", ego_r, phase_center_ego)
+    center_stamp = truth.start_ns + int(round(t_center_s * 1e9))
+    c_position, c_attitude = tracklog.at(center_stamp)
+    c_r = enu_r_ecef @ quat_wxyz_to_matrix(c_attitude[0]) @ ego_from_imu.rotation.T
+    c_t = truth.enu.ecef_to_enu(c_position[0]) - c_r @ ego_from_imu.translation
+    # Keep the image plane level: only the yaw of the (noisy) ego pose orients it.
+    yaw = np.arctan2(c_r[1, 0], c_r[0, 0])
+    level = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    grid = geometry.grid_enu(level, c_t)
+    image = form_image(params, profiles, phase_centers, grid)
+    return image, grid.transformed(truth.enu.ecef_T_enu), (float(t[0]), float(t[-1]))
+
+
+def frame_times(duration_s: float, rate_hz: float) -> np.ndarray:
+    """Frame times (scene seconds) at ``rate_hz``, the first half a period in."""
+    return (np.arange(int(round(duration_s * rate_hz))) + 0.5) / rate_hz
+
+
+def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene_index: int, *, with_labels: bool = True) -> dict:
+    """Simulate every stream of a scene into an open ``SceneWriter``; returns its label rows."""
+    duration = profile.scene_duration_s
+    ns = lambda t: truth.start_ns + int(round(float(t) * 1e9))  # noqa: E731 - scene seconds to GPS ns
+    written = truth.tracklog_written
+    writer.write_tracklog(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
+    tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
+    for sensor in ego_model.RADARS:
+        rng = stream_rng(seed, scene_index, sensor)
+        for t in frame_times(duration, profile.radar_rate_hz):
+            writer.append_radar(sensor, ns(t), simulate_cube(truth, profile, sensor, t, rng))
+    sar_times = frame_times(duration, profile.sar_rate_hz)
+    for sensor in ego_model.RADARS:
+        rng = stream_rng(seed, scene_index, f"sar_{sensor}")
+        for t in sar_times:
+            image, grid, (t0, t1) = simulate_sar(truth, profile, sensor, t, rng, tracklog)
+            writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64))
+    rng = stream_rng(seed, scene_index, "lidar")
+    returns_per_sweep = {}
+    for t in frame_times(duration, profile.lidar_rate_hz):
+        rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(t))
+        boxes = truth.world.boxes_at(t)
+        points, hit = lidar_sweep(rng, rotation, position, boxes, profile.lidar_azimuth_step_deg)
+        writer.append_lidar(ego_model.LIDAR, ns(t), points)
+        tracks = boxes.track_id[hit[hit >= 0]]
+        returns_per_sweep[float(t)] = np.bincount(tracks[tracks > 0], minlength=len(truth.world.cars) + 1)
+    k, distortion = ego_model.camera_intrinsics(profile)
+    rays = camera_model.pixel_rays(k, distortion, *profile.camera_shape)
+    for t in frame_times(duration, profile.camera_rate_hz):
+        rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.CAMERA, np.array(t))
+        writer.append_camera(ego_model.CAMERA, ns(t), camera_model.render(rays, rotation, position, truth.world.boxes_at(t)))
+    labels = label_rows(truth.world, truth.ego, sar_times, returns_per_sweep, [ns(t) for t in sar_times])
+    if with_labels:
+        writer.write_labels(labels)
+    return labels
