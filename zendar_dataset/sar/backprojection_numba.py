@@ -49,19 +49,22 @@ def _cis_neg_turns(turns):
         np.float32(-0.5)
         + x2 * (np.float32(1.0 / 24) + x2 * (np.float32(-1.0 / 720) + x2 * np.float32(1.0 / 40320)))
     )
-    q = np.int32(quarter) & 3
-    swap = (q & 1) == 1
-    cos_sign = np.float32(1 - 2 * (((q + 1) >> 1) & 1))
-    sin_sign = np.float32(1 - 2 * ((q >> 1) & 1))
-    cos_t = cos_sign * (sin_x if swap else cos_x)
-    sin_t = sin_sign * (cos_x if swap else sin_x)
+    # Quadrant 0..3 and its swap/negation as float compares: integer code here would
+    # widen to int64 and cost more than the polynomials.
+    quadrant = quarter - np.float32(4.0) * np.floor(quarter * np.float32(0.25))
+    swap = (quadrant == np.float32(1.0)) | (quadrant == np.float32(3.0))
+    negate_cos = (quadrant == np.float32(1.0)) | (quadrant == np.float32(2.0))
+    negate_sin = quadrant >= np.float32(2.0)
+    cos_t = sin_x if swap else cos_x
+    sin_t = cos_x if swap else sin_x
+    cos_t = -cos_t if negate_cos else cos_t
+    sin_t = -sin_t if negate_sin else sin_t
     return cos_t, -sin_t
 
 
-@numba.njit(parallel=True, fastmath=True, cache=True)
+@numba.njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
 def _kernel(
-    profiles_re,
-    profiles_im,
+    profiles,
     positions,
     origin,
     di,
@@ -75,12 +78,15 @@ def _kernel(
     out_re,
     out_im,
 ):
-    num_pulses, num_samples = profiles_re.shape
+    num_pulses, num_samples = profiles.shape
     num_segments = (width + seg_px - 1) // seg_px
     dj_norm2 = np.float32(dj[0] * dj[0] + dj[1] * dj[1] + dj[2] * dj[2])
     inv_bin32 = np.float32(inv_bin)
     cycles32 = np.float32(cycles_per_m)
     last = np.float32(num_samples - 1)
+    max_lower = np.uint32(num_samples - 2)
+    # Keeps 0/0 finite when a pulse sits exactly on a segment centre.
+    tiny = np.float32(1e-30)
     for tile in numba.prange(height * num_segments):
         row = tile // num_segments
         col0 = (tile % num_segments) * seg_px
@@ -93,6 +99,15 @@ def _kernel(
             offsets[q] = np.float32(q - (seg_px - 1) / 2)
         acc_re = np.zeros(seg_px, dtype=np.float32)
         acc_im = np.zeros(seg_px, dtype=np.float32)
+        lower = np.empty(seg_px, dtype=np.uint32)
+        weight = np.empty(seg_px, dtype=np.float32)
+        rot_re = np.empty(seg_px, dtype=np.float32)
+        rot_im = np.empty(seg_px, dtype=np.float32)
+        # (re, im) float32 pairs moved as one 64-bit word each.
+        pairs_lo = np.empty(seg_px, dtype=np.uint64)
+        pairs_hi = np.empty(seg_px, dtype=np.uint64)
+        lo = pairs_lo.view(np.float32)
+        hi = pairs_hi.view(np.float32)
         for p in range(num_pulses):
             # float64 per (segment, pulse): see zendar_dataset.sar.segments.
             dx = positions[p, 0] - cx
@@ -105,25 +120,34 @@ def _kernel(
             base_index = np.float32((r_ref64 - range_offset_m) * inv_bin)
             r_ref = np.float32(r_ref64)
             r_ref2 = r_ref * r_ref
-            prof_re = profiles_re[p]
-            prof_im = profiles_im[p]
+            # Geometry, interpolation weights and phase rotation: SIMD.
             for q in range(seg_px):
                 m = offsets[q]
                 s = m * (m * dj_norm2 - b)
-                delta_r = s / (np.sqrt(r_ref2 + s) + r_ref)
+                delta_r = s / (np.sqrt(r_ref2 + s) + r_ref + tiny)
                 index = base_index + delta_r * inv_bin32
-                inside = np.float32(1.0) if (index >= 0) and (index <= last) else np.float32(0.0)
+                inside = np.float32((index >= np.float32(0.0)) & (index <= last))
                 index = min(max(index, np.float32(0.0)), last)
-                lower = min(np.int32(index), np.int32(num_samples - 2))
-                weight = index - np.float32(lower)
-                lo_re = prof_re[lower]
-                lo_im = prof_im[lower]
-                v_re = (lo_re + weight * (prof_re[lower + 1] - lo_re)) * inside
-                v_im = (lo_im + weight * (prof_im[lower + 1] - lo_im)) * inside
+                low = min(np.uint32(index), max_lower)
+                lower[q] = low
+                weight[q] = index - np.float32(low)
                 c, s_neg = _cis_neg_turns(ref_turns + delta_r * cycles32)
-                # value · exp(−j·θ) = value · (c + j·s_neg)
-                acc_re[q] += v_re * c - v_im * s_neg
-                acc_im[q] += v_re * s_neg + v_im * c
+                rot_re[q] = c * inside
+                rot_im[q] = s_neg * inside
+            # Indexed loads: scalar, as gathers do not pay on every x86 target.
+            profile = profiles[p]
+            for q in range(seg_px):
+                low = lower[q]
+                pairs_lo[q] = profile[low]
+                pairs_hi[q] = profile[low + 1]
+            # Linear interpolation and complex multiply-accumulate: SIMD.
+            for q in range(seg_px):
+                w = weight[q]
+                v_re = lo[2 * q] + w * (hi[2 * q] - lo[2 * q])
+                v_im = lo[2 * q + 1] + w * (hi[2 * q + 1] - lo[2 * q + 1])
+                # value · exp(−j·θ) = value · (rot_re + j·rot_im)
+                acc_re[q] += v_re * rot_re[q] - v_im * rot_im[q]
+                acc_im[q] += v_re * rot_im[q] + v_im * rot_re[q]
         n = min(seg_px, width - col0)
         for q in range(n):
             out_re[row, col0 + q] = acc_re[q]
@@ -147,8 +171,7 @@ def backproject_numba(
     out_re = np.empty((height, width), dtype=np.float32)
     out_im = np.empty((height, width), dtype=np.float32)
     _kernel(
-        np.ascontiguousarray(profiles.real, dtype=np.float32),
-        np.ascontiguousarray(profiles.imag, dtype=np.float32),
+        np.ascontiguousarray(profiles, dtype=np.complex64).view(np.uint64),
         np.ascontiguousarray(positions, dtype=np.float64),
         grid.origin,
         grid.di,
