@@ -205,6 +205,9 @@ def estimate_azimuth(
     if grid.ndim != 1 or grid.size < 3:
         raise ValueError("grid_rad must be a 1-D array of at least 3 azimuths")
 
+    if x.shape[0] == 0:
+        empty = np.zeros((0,) if n_sources == 1 else (0, n_sources))
+        return (empty, DoaSpectrum(grid_rad=grid, power=np.zeros((0, grid.size)))) if return_spectrum else empty
     cov = spatial_covariance(x, subarray_size=subarray_size, forward_backward=forward_backward)
     matrix = _spectrum_matrix(cov, method, n_sources, loading)
     coarse = _spectrum(matrix, steering_vectors(grid, sub_rx, wavelength_m), method)

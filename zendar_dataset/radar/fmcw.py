@@ -211,7 +211,7 @@ class FmcwParams:
             if not (np.isfinite(values[key]) and values[key] > 0):
                 problems.append(f"{where}.{key}: expected a positive number, found {values[key]!r}")
         if problems:
-            raise ZendarFormatError(f"{where}: invalid radar calibration", problems)
+            raise ZendarFormatError("invalid radar calibration: " + "; ".join(problems), problems)
         expected_bin = SPEED_OF_LIGHT_MPS / (2.0 * values["bandwidth_hz"])
         if abs(values["range_bin_m"] / expected_bin - 1.0) > _RANGE_BIN_TOLERANCE:
             problems.append(
@@ -232,7 +232,7 @@ class FmcwParams:
         except ZendarFormatError as err:
             problems.extend(f"{where}: {p}" for p in err.problems)
         if problems:
-            raise ZendarFormatError(f"{where}: invalid radar calibration", problems)
+            raise ZendarFormatError("invalid radar calibration: " + "; ".join(problems), problems)
         return params
 
     def to_calibration(self) -> dict[str, Any]:
