@@ -30,7 +30,9 @@ def band_detections(frames, results):
     gt = read_frames(frames, who="gt", required=("x", "y")).table
     pred = read_frames(results, who="p", required=("x", "y", "score")).table
     frame_of = pred.frame_of_row
-    matched = match_frames(pred.x_m, pred.y_m, pred.score, frame_of, gt.x_m, gt.y_m, gt.offsets)
+    assert pred.frame_ids == gt.frame_ids
+    same_frame = np.arange(len(pred.frame_ids))
+    matched = match_frames(pred.x_m, pred.y_m, pred.score, pred.offsets, same_frame, gt.x_m, gt.y_m, gt.offsets)
     is_tp = matched >= 0
     gt_r = range_m(gt.x_m, gt.y_m)
     det_r = range_m(pred.x_m, pred.y_m)

@@ -110,14 +110,16 @@ def test_equal_scores_keep_list_order_and_equal_distances_take_the_earlier_gt():
 
 
 def test_vectorised_matching_agrees_with_the_readable_rule_on_ties():
-    pred_x = np.array([10.0, 10.0, 30.0, 30.0])
+    # Prediction frame 0 is ground-truth frame 1 and vice versa.
+    pred_x = np.array([30.0, 30.0, 10.0, 10.0])
     pred_y = np.array([0.0, 0.0, 0.0, 0.0])
-    score = np.array([0.5, 0.5, 0.1, 0.2])
-    frame = np.array([0, 0, 1, 1])
+    score = np.array([0.1, 0.2, 0.5, 0.5])
     gt_x = np.array([10.0, 10.0, 31.0])
     gt_y = np.array([1.0, -1.0, 0.0])
-    matched = match_frames(pred_x, pred_y, score, frame, gt_x, gt_y, np.array([0, 2, 3]))
-    assert matched.tolist() == [0, 1, -1, 2]
+    matched = match_frames(
+        pred_x, pred_y, score, np.array([0, 2, 4]), np.array([1, 0]), gt_x, gt_y, np.array([0, 2, 3])
+    )
+    assert matched.tolist() == [-1, 2, 0, 1]
 
 
 def test_empty_frames_and_no_detections():

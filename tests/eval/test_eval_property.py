@@ -101,3 +101,21 @@ def test_random_large_input_matches_reference():
     assert metrics["counts"] == expected["counts"]
     for band in expected["ap"]:
         assert metrics["ap"][band] == pytest.approx(expected["ap"][band], abs=1e-9)
+
+
+def test_crowded_frames_with_tied_scores_match_reference():
+    # More than 32 detections a frame takes the kernel's mergesort path instead of insertion sort.
+    rng = random.Random(3)
+    frames, results = {}, {}
+    for k in range(6):
+        frame_id = f"crowd/{k}"
+        frames[frame_id] = [{"x": rng.uniform(-20, 20), "y": rng.uniform(-20, 20)} for _ in range(60)]
+        results[frame_id] = [
+            {"x": rng.uniform(-20, 20), "y": rng.uniform(-20, 20), "score": rng.choice([0.2, 0.5, 0.8])}
+            for _ in range(rng.choice([20, 200]))
+        ]
+    metrics = evaluate({"results": results}, {"frames": frames})
+    expected = reference_evaluate(results, frames)
+    assert metrics["counts"] == expected["counts"]
+    for band in expected["ap"]:
+        assert metrics["ap"][band] == pytest.approx(expected["ap"][band], abs=1e-9)

@@ -37,6 +37,13 @@ class PrecisionRecall:
             raise ValueError(f"curve arrays must share one 1-D shape, got {sorted(shapes)}")
 
 
+def group_ends(sorted_score: np.ndarray) -> np.ndarray:
+    """int64 (K,): the last index of each run of equal values in a sorted score array (N,)."""
+    if len(sorted_score) == 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.append(sorted_score[1:] != sorted_score[:-1], True))
+
+
 def sort_by_score(score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Descending order of ``score`` and the positions (in that order) where a run of equal scores ends.
 
@@ -46,11 +53,7 @@ def sort_by_score(score: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         int64 (N,) permutation and int64 (K,) last index of each distinct-score group.
     """
     order = np.argsort(-score, kind="stable")
-    sorted_score = score[order]
-    group_ends = np.flatnonzero(np.append(sorted_score[1:] != sorted_score[:-1], True)) if len(score) else (
-        np.zeros(0, dtype=np.int64)
-    )
-    return order, group_ends
+    return order, group_ends(score[order])
 
 
 def curve_from_cumulative(
@@ -78,7 +81,7 @@ def curve_from_cumulative(
 
 
 def average_precision(
-    score: np.ndarray, is_tp: np.ndarray, n_gt: int
+    score: np.ndarray, is_tp: np.ndarray, n_gt: int, *, presorted: bool = False
 ) -> tuple[float | None, PrecisionRecall]:
     """AP of one band: ties form one step, precision envelope, AP = Σ (Rₙ − Rₙ₋₁)·P_env(Rₙ).
 
@@ -90,6 +93,8 @@ def average_precision(
         bool (N,).
     n_gt
         Ground truths in the band.
+    presorted
+        ``score`` is already in descending order (saves a sort when many bands share one).
 
     Returns
     -------
@@ -99,11 +104,13 @@ def average_precision(
     if n_gt == 0:
         empty = np.zeros(0)
         return None, PrecisionRecall(empty, empty, empty, empty)
-    order, group_ends = sort_by_score(score)
-    tp_sorted = is_tp[order]
-    tp_cumulative = np.cumsum(tp_sorted)[group_ends]
-    fp_cumulative = (group_ends + 1) - tp_cumulative
+    if not presorted:
+        order = np.argsort(-score, kind="stable")
+        score, is_tp = score[order], is_tp[order]
+    ends = group_ends(score)
+    tp_cumulative = np.cumsum(is_tp)[ends]
+    fp_cumulative = (ends + 1) - tp_cumulative
     recall, precision, envelope, ap = curve_from_cumulative(
         tp_cumulative.astype(np.float64), fp_cumulative.astype(np.float64), float(n_gt)
     )
-    return ap, PrecisionRecall(score[order][group_ends], recall, precision, envelope)
+    return ap, PrecisionRecall(score[ends], recall, precision, envelope)

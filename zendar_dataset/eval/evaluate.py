@@ -110,17 +110,9 @@ def _curve_json(curve: PrecisionRecall) -> dict[str, list[float]]:
     }
 
 
-def _restrict_ground_truth(
-    ground_truth: DetectionTable, frame_ids: list[str]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ground-truth rows of ``frame_ids`` (a subsequence of the ground truth's frames), with offsets."""
-    position = {frame_id: i for i, frame_id in enumerate(frame_ids)}
-    evaluated_index = np.array([position.get(f, -1) for f in ground_truth.frame_ids], dtype=np.int64)
-    row_frame = evaluated_index[ground_truth.frame_of_row]
-    keep = row_frame >= 0
-    offsets = np.zeros(len(frame_ids) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(row_frame[keep], minlength=len(frame_ids)), out=offsets[1:])
-    return ground_truth.x_m[keep], ground_truth.y_m[keep], offsets
+def scene_of(frame_id: str) -> str:
+    """The scene id of a frame id ``"<scene_id>/<timestamp_ns>"``."""
+    return frame_id.rpartition("/")[0]
 
 
 def score_tables(
@@ -138,7 +130,8 @@ def score_tables(
     predictions, ground_truth
         Validated detection tables.
     partial
-        Evaluate only the ground-truth frames present in the predictions.
+        Evaluate only the ground-truth frames present in the predictions; otherwise every
+        ground-truth frame must be in the predictions.
     bootstrap
         Number of scene resamples for confidence intervals (0: none).
     seed
@@ -148,58 +141,74 @@ def score_tables(
     -------
     dict
         ``ap``, ``counts``, ``pr_curves``, ``protocol``, ``partial``, ``n_frames``,
-        ``n_frames_ground_truth``, ``n_scenes`` and, when asked, ``bootstrap``.
+        ``n_frames_ground_truth``, ``n_scenes``, ``n_predictions`` and, when asked, ``bootstrap``.
     """
+    gt_position = {frame_id: g for g, frame_id in enumerate(ground_truth.frame_ids)}
+    pred_gt_frame = np.array([gt_position[f] for f in predictions.frame_ids], dtype=np.int64)
     if partial:
-        present = set(predictions.frame_ids)
-        frame_ids = [f for f in ground_truth.frame_ids if f in present]
+        evaluated_frame = np.zeros(len(ground_truth.frame_ids), dtype=bool)
+        evaluated_frame[pred_gt_frame] = True
+        gt_evaluated = evaluated_frame[ground_truth.frame_of_row]
     else:
-        frame_ids = list(ground_truth.frame_ids)
-    gt_x_m, gt_y_m, gt_offsets = _restrict_ground_truth(ground_truth, frame_ids)
-    position = {frame_id: i for i, frame_id in enumerate(frame_ids)}
-    pred_frame_index = np.array([position[f] for f in predictions.frame_ids], dtype=np.int64)
-    pred_frame = pred_frame_index[predictions.frame_of_row]
+        gt_evaluated = np.ones(len(ground_truth.x_m), dtype=bool)
     score = predictions.score
 
     matched = match_frames(
-        predictions.x_m, predictions.y_m, score, pred_frame, gt_x_m, gt_y_m, gt_offsets
+        predictions.x_m,
+        predictions.y_m,
+        score,
+        predictions.offsets,
+        pred_gt_frame,
+        ground_truth.x_m,
+        ground_truth.y_m,
+        ground_truth.offsets,
     )
     is_tp = matched != UNMATCHED
-    gt_range_m = range_m(gt_x_m, gt_y_m)
+    gt_range_m = range_m(ground_truth.x_m, ground_truth.y_m)
     # A TP lives in its ground truth's band, an FP in its own: this is what keeps a correct
     # detection straddling a band edge from scoring one FP plus one miss.
     detection_range_m = range_m(predictions.x_m, predictions.y_m)
     detection_range_m[is_tp] = gt_range_m[matched[is_tp]]
 
-    scene_names = [f.rsplit("/", 1)[0] for f in frame_ids]
-    scenes = sorted(set(scene_names))
-    scene_index = {s: i for i, s in enumerate(scenes)}
-    frame_scene = np.array([scene_index[s] for s in scene_names], dtype=np.int64)
-    gt_scene = np.repeat(frame_scene, np.diff(gt_offsets))
-    pred_scene = frame_scene[pred_frame] if len(frame_scene) else np.zeros(0, np.int64)
+    # One sort by descending score serves every band (a band is a mask of the sorted arrays).
+    # Ties form one step, so their order within the sort does not matter and an unstable sort will do.
+    order = np.argsort(-score)
+    score, is_tp, detection_range_m = score[order], is_tp[order], detection_range_m[order]
 
     metrics: dict[str, Any] = {"ap": {}, "counts": {}, "pr_curves": {}}
-    band_detections = {}
+    band_masks = {}
     for band in BANDS_M:
         detection_in = in_band(detection_range_m, band)
-        gt_in = in_band(gt_range_m, band)
+        gt_in = in_band(gt_range_m, band) & gt_evaluated
+        band_masks[band] = (detection_in, gt_in)
         n_gt = int(gt_in.sum())
-        ap, curve = average_precision(score[detection_in], is_tp[detection_in], n_gt)
+        band_score, band_is_tp = score[detection_in], is_tp[detection_in]
+        ap, curve = average_precision(band_score, band_is_tp, n_gt, presorted=True)
         metrics["ap"][band] = ap
-        n_tp = int((is_tp & detection_in).sum())
-        metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": int(detection_in.sum()) - n_tp}
+        n_tp = int(band_is_tp.sum())
+        metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": len(band_score) - n_tp}
         metrics["pr_curves"][band] = _curve_json(curve)
-        band_detections[band] = BandDetections(
-            score[detection_in], is_tp[detection_in], pred_scene[detection_in], gt_scene[gt_in]
-        )
+
+    scene_names = [scene_of(ground_truth.frame_ids[g]) for g in pred_gt_frame] if partial else None
+    scenes = sorted(set(scene_names if partial else map(scene_of, ground_truth.frame_ids)))
     metrics["protocol"] = protocol_dict()
     metrics["partial"] = bool(partial)
-    metrics["n_frames"] = len(frame_ids)
+    metrics["n_frames"] = len(predictions.frame_ids) if partial else len(ground_truth.frame_ids)
     metrics["n_frames_ground_truth"] = len(ground_truth.frame_ids)
     metrics["n_scenes"] = len(scenes)
     metrics["n_predictions"] = int(len(score))
     if bootstrap:
-        metrics["bootstrap"] = bootstrap_intervals(band_detections, len(scenes), bootstrap, seed)
+        scene_index = {name: k for k, name in enumerate(scenes)}
+        gt_frame_scene = np.array(
+            [scene_index.get(scene_of(f), -1) for f in ground_truth.frame_ids], dtype=np.int64
+        )
+        gt_scene = gt_frame_scene[ground_truth.frame_of_row]
+        pred_scene = np.repeat(gt_frame_scene[pred_gt_frame], predictions.counts)[order]
+        bands = {
+            band: BandDetections(score[d_in], is_tp[d_in], pred_scene[d_in], gt_scene[g_in])
+            for band, (d_in, g_in) in band_masks.items()
+        }
+        metrics["bootstrap"] = bootstrap_intervals(bands, len(scenes), bootstrap, seed)
     return metrics
 
 

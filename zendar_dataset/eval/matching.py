@@ -60,16 +60,37 @@ def match_frame(
 
 
 @numba.njit(cache=True, nogil=True)
-def _match_sorted_frames(pred_x, pred_y, pred_offsets, gt_x, gt_y, gt_offsets, match_distance_m):
-    n_frames = len(pred_offsets) - 1
+def _stable_descending_order(score):
+    # Equal scores keep their list order. Insertion sort for the usual handful of detections
+    # (no allocation beyond the result); mergesort, which is stable, for longer lists.
+    n = len(score)
+    if n > 32:
+        return np.argsort(-score, kind="mergesort")
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        j = i
+        while j > 0 and score[order[j - 1]] < score[i]:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = i
+    return order
+
+
+@numba.njit(cache=True, nogil=True)
+def _match_frames_kernel(
+    pred_x, pred_y, pred_score, pred_offsets, pred_gt_frame, gt_x, gt_y, gt_offsets, match_distance_m
+):
     matched = np.full(len(pred_x), -1, dtype=np.int64)
     taken = np.zeros(len(gt_x), dtype=np.bool_)
-    for f in range(n_frames):
-        g_start = gt_offsets[f]
-        g_stop = gt_offsets[f + 1]
-        if g_start == g_stop:
+    for f in range(len(pred_offsets) - 1):
+        p_start = pred_offsets[f]
+        g_start = gt_offsets[pred_gt_frame[f]]
+        g_stop = gt_offsets[pred_gt_frame[f] + 1]
+        if g_start == g_stop or p_start == pred_offsets[f + 1]:
             continue
-        for p in range(pred_offsets[f], pred_offsets[f + 1]):
+        by_score = _stable_descending_order(pred_score[p_start : pred_offsets[f + 1]])
+        for k in range(len(by_score)):
+            p = p_start + by_score[k]
             best = -1
             best_distance = match_distance_m  # strict "<" below makes the threshold exclusive
             for g in range(g_start, g_stop):
@@ -91,7 +112,8 @@ def match_frames(
     pred_x_m: np.ndarray,
     pred_y_m: np.ndarray,
     pred_score: np.ndarray,
-    pred_frame: np.ndarray,
+    pred_offsets: np.ndarray,
+    pred_gt_frame: np.ndarray,
     gt_x_m: np.ndarray,
     gt_y_m: np.ndarray,
     gt_offsets: np.ndarray,
@@ -102,13 +124,15 @@ def match_frames(
     Parameters
     ----------
     pred_x_m, pred_y_m, pred_score
-        float64 (P,), ego frame, metres; in any frame order, each frame's detections in list order.
-    pred_frame
-        int64 (P,): frame index of each prediction, in ``[0, F)``.
+        float64 (P,), ego frame, metres; grouped by frame, each frame's detections in list order.
+    pred_offsets
+        int64 (F_p + 1,): predictions of frame f are rows ``pred_offsets[f]:pred_offsets[f + 1]``.
+    pred_gt_frame
+        int64 (F_p,): the ground-truth frame of each prediction frame (each used at most once).
     gt_x_m, gt_y_m
         float64 (G,), ego frame, metres, grouped by frame.
     gt_offsets
-        int64 (F + 1,): ground truth of frame f is ``gt_offsets[f]:gt_offsets[f + 1]``.
+        int64 (F_g + 1,): ground truth of frame g is ``gt_offsets[g]:gt_offsets[g + 1]``.
     match_distance_m
         The match threshold (exclusive).
 
@@ -117,21 +141,14 @@ def match_frames(
     numpy.ndarray
         int64 (P,): index into the ground-truth arrays matched by each prediction, or -1.
     """
-    n_frames = len(gt_offsets) - 1
-    # Frame, then descending score; both sorts are stable, so equal scores keep list order.
-    by_score = np.argsort(-pred_score, kind="stable")
-    order = by_score[np.argsort(pred_frame[by_score], kind="stable")]
-    pred_offsets = np.zeros(n_frames + 1, dtype=np.int64)
-    np.cumsum(np.bincount(pred_frame, minlength=n_frames), out=pred_offsets[1:])
-    matched_sorted = _match_sorted_frames(
-        np.ascontiguousarray(pred_x_m[order], dtype=np.float64),
-        np.ascontiguousarray(pred_y_m[order], dtype=np.float64),
-        pred_offsets,
+    return _match_frames_kernel(
+        np.ascontiguousarray(pred_x_m, dtype=np.float64),
+        np.ascontiguousarray(pred_y_m, dtype=np.float64),
+        np.ascontiguousarray(pred_score, dtype=np.float64),
+        np.ascontiguousarray(pred_offsets, dtype=np.int64),
+        np.ascontiguousarray(pred_gt_frame, dtype=np.int64),
         np.ascontiguousarray(gt_x_m, dtype=np.float64),
         np.ascontiguousarray(gt_y_m, dtype=np.float64),
-        np.asarray(gt_offsets, dtype=np.int64),
+        np.ascontiguousarray(gt_offsets, dtype=np.int64),
         float(match_distance_m),
     )
-    matched = np.empty_like(matched_sorted)
-    matched[order] = matched_sorted
-    return matched

@@ -262,10 +262,11 @@ def read_frames(
         finite = np.ones(len(flat), dtype=bool)
         for values in columns.values():
             finite &= np.isfinite(values)
+        suspect = ~finite
         # Detections with more keys than the required ones may carry optional fields to check.
-        n_required = len(required)
-        extra_keys = np.fromiter((len(d) != n_required for d in flat), dtype=bool, count=len(flat))
-        suspects = np.flatnonzero(~finite | (extra_keys if optional else np.zeros_like(finite)))
+        if optional and set(map(len, flat)) - {len(required)}:
+            suspect |= np.fromiter((len(d) != len(required) for d in flat), dtype=bool, count=len(flat))
+        suspects = np.flatnonzero(suspect)
 
     if len(suspects):
         frame_of = np.searchsorted(offsets, suspects, side="right") - 1
