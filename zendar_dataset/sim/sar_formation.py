@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import window_values
@@ -93,31 +94,39 @@ class SarGeometry:
         )
 
 
-def profiles_for_backprojection(params: FmcwParams, profiles: np.ndarray) -> tuple[np.ndarray, float]:
+def profiles_for_backprojection(params: FmcwParams, profiles: np.ndarray, upsample: int = 4) -> tuple[np.ndarray, float, float]:
     """Prepare raw-DFT range profiles ``[P, N]`` for backprojection.
 
-    The raw DFT of a tone carries, besides the carrier phase, a linear phase of
-    ``pi (N - 1) / N`` per bin away from the tone (the window starts at sample 0)
-    and the residual video phase ``-pi S tau^2``.  Multiplying bin ``r`` by
-    ``exp(j pi r (N - 1) / N)`` centres the window, which leaves a smooth
-    envelope that linear interpolation in range handles, at the price of the
-    carrier now being the sweep's mid frequency ``f_c + S (N - 1) / (2 f_s)``;
-    multiplying by ``exp(j pi S tau_r^2)`` removes the residual video phase of the
-    range of each bin.
+    Backprojection interpolates profiles linearly in range, which would pull a
+    Hann main lobe (~2 bins wide) towards its nearest sample by up to half a
+    bin; the profiles are therefore first upsampled ``upsample`` times (exactly,
+    by zero-padding the fast-time samples).  The raw DFT of a tone also carries a
+    linear phase of ``pi (N - 1) / N`` per original bin away from the tone (the
+    window starts at sample 0) and the residual video phase ``-pi S tau^2``:
+    multiplying fine bin ``r`` by ``exp(j pi r (N - 1) / (N U))`` centres the
+    window, leaving a smooth envelope, at the price of the carrier now being the
+    sweep's mid frequency ``f_c + S (N - 1) / (2 f_s)``; multiplying by
+    ``exp(j pi S tau_r^2)`` removes the residual video phase of each bin's range.
 
     Returns
     -------
     profiles : numpy.ndarray
-        ``[P, N]`` complex64.
+        ``[P, N * upsample]`` complex64.
+    range_bin_m : float
+        Spacing of the upsampled profiles.
     center_frequency_hz : float
         The carrier to backproject with.
     """
     n = params.n_samples
-    r = np.arange(n)
-    tau = 2.0 * r * params.range_bin_m / SPEED_OF_LIGHT_MPS
-    correction = np.exp(1j * np.pi * (r * (n - 1) / n + np.mod(params.slope_hz_per_s * tau * tau, 2.0)))
+    n_fine = n * int(upsample)
+    samples = scipy.fft.ifft(profiles, axis=1)
+    fine = scipy.fft.fft(samples, n=n_fine, axis=1)
+    r = np.arange(n_fine)
+    bin_m = params.range_bin_m / upsample
+    tau = 2.0 * r * bin_m / SPEED_OF_LIGHT_MPS
+    correction = np.exp(1j * np.pi * (r * (n - 1) / n_fine + np.mod(params.slope_hz_per_s * tau * tau, 2.0)))
     frequency = params.center_frequency_hz + params.slope_hz_per_s * (n - 1) / (2.0 * params.sample_rate_hz)
-    return (profiles * correction[None, :]).astype(np.complex64), frequency
+    return (fine * correction[None, :]).astype(np.complex64), bin_m, frequency
 
 
 def form_image(
@@ -131,8 +140,8 @@ def form_image(
     The profiles are normalised by the window sum, so a point scatterer of
     per-sample amplitude ``a`` seen by ``P`` pulses peaks near ``a * P``.
     """
-    prepared, frequency = profiles_for_backprojection(params, profiles)
+    prepared, bin_m, frequency = profiles_for_backprojection(params, profiles)
     scale = 1.0 / float(np.sum(window_values("hann", params.n_samples)))
     return backproject(
-        prepared * np.float32(scale), phase_centers, grid, range_bin_m=params.range_bin_m, center_frequency_hz=frequency
+        prepared * np.float32(scale), phase_centers, grid, range_bin_m=bin_m, center_frequency_hz=frequency
     )
