@@ -42,6 +42,7 @@ def _ground_truth_from_dataset(root: Path, split: str | None) -> CheckedInput:
     # Imported here so that scoring JSON files never needs the storage backends.
     from zendar_dataset.format.ground_truth import ground_truth_frames
 
+    # By default, the first split whose scenes carry labels (the format raises for one without).
     candidates = [split] if split is not None else list(DEFAULT_SPLITS)
     reasons = []
     for candidate in candidates:
@@ -49,10 +50,6 @@ def _ground_truth_from_dataset(root: Path, split: str | None) -> CheckedInput:
             frames = ground_truth_frames(root, candidate)
         except ZendarError as exc:
             reasons.append(f"split {candidate!r}: {exc}")
-            continue
-        # The default is the first split whose scenes carry labels.
-        if split is None and not any(frames.values()):
-            reasons.append(f"split {candidate!r} has no labelled objects")
             continue
         checked = read_frames(frames, who="ground truth", required=GROUND_TRUTH_REQUIRED)
         checked.split = candidate
