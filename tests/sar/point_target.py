@@ -6,9 +6,11 @@ spacing works). With the sweep centred on the carrier, sample ``k`` at frequency
 ``f_k = f_c + B·u_k``, ``u_k = (k − (N − 1)/2)/N``:
 
     X(r) = Σ_k w_k · exp(j·4π·R·f_k/c) · exp(−j·4π·r·(f_k − f_c)/c)
-         = exp(j·4π·R/λ) · Σ_k w_k · exp(j·4π·(R − r)·B·u_k/c),
+         = exp(j·4π·R/λ) · Σ_k exp(j·4π·(R − r)·B·u_k/c)        (unwindowed, w_k = 1)
+    = exp(j·4π·R/λ) · sin(N·x/2) / sin(x/2),   x = 4π·(R − r)·B/(c·N),
 
 peaking at r = R with the carrier phase exp(+j·4π·R/λ) of docs/architecture.md.
+The Dirichlet kernel's 3-dB width is 0.886·c/(2B) for large N.
 """
 
 from __future__ import annotations
@@ -27,17 +29,18 @@ def point_target_profiles(
     bandwidth_hz: float,
     center_frequency_hz: float,
     num_fast_samples: int = 256,
-    window: np.ndarray | None = None,
 ) -> np.ndarray:
     """Profiles [P, len(sample_ranges_m)] complex64 of targets [K, 3] seen from [P, 3]."""
-    u = (np.arange(num_fast_samples) - (num_fast_samples - 1) / 2) / num_fast_samples
-    w = np.ones(num_fast_samples) if window is None else np.asarray(window, dtype=np.float64)
+    n = num_fast_samples
     wavelength_m = SPEED_OF_LIGHT_MPS / center_frequency_hz
     profiles = np.zeros((len(positions_m), len(sample_ranges_m)), dtype=np.complex128)
     for target, amplitude in zip(np.atleast_2d(targets_m), np.atleast_1d(amplitudes)):
         ranges_m = np.linalg.norm(target - positions_m, axis=1)  # [P]
         lag_m = ranges_m[:, None] - sample_ranges_m[None, :]  # [P, S]
-        kernel = np.exp(1j * 4 * np.pi * bandwidth_hz / SPEED_OF_LIGHT_MPS * lag_m[..., None] * u) @ w
+        half_x = 2 * np.pi * bandwidth_hz / (SPEED_OF_LIGHT_MPS * n) * lag_m
+        sin_half_x = np.sin(half_x)
+        small = np.abs(sin_half_x) < 1e-12
+        kernel = np.where(small, n, np.sin(n * half_x) / np.where(small, 1.0, sin_half_x))
         profiles += amplitude * np.exp(1j * 4 * np.pi * ranges_m / wavelength_m)[:, None] * kernel
     return profiles.astype(np.complex64)
 
