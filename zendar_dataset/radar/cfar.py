@@ -237,7 +237,7 @@ def _box_at(table: np.ndarray, m: int, r: int, d: int, r0: int, r1: int, d0: int
     )
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)  # serial: on busy shared cores numba's thread pool ran up to 10x slower
 def _box_cfar_kernel(
     table: np.ndarray,
     power: np.ndarray,
@@ -326,7 +326,7 @@ def _kth_smallest(a: np.ndarray, b: np.ndarray, n: int, k: int) -> float:
         pivot = _median3(a, n)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)  # serial: on busy shared cores numba's thread pool ran up to 10x slower
 def _os_kernel(padded: np.ndarray, offsets: np.ndarray, half_r: int, half_d: int, k: int, out: np.ndarray) -> None:
     n_maps, n_r, n_d = out.shape
     n = offsets.shape[0]
