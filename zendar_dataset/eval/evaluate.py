@@ -140,8 +140,11 @@ def score_tables(
         ``ap``, ``counts``, ``pr_curves``, ``protocol``, ``partial``, ``n_frames``,
         ``n_frames_ground_truth``, ``n_scenes``, ``n_predictions`` and, when asked, ``bootstrap``.
     """
-    gt_position = {frame_id: g for g, frame_id in enumerate(ground_truth.frame_ids)}
-    pred_gt_frame = np.array([gt_position[f] for f in predictions.frame_ids], dtype=np.int64)
+    if predictions.frame_ids == ground_truth.frame_ids:  # the usual case: files listed in one order
+        pred_gt_frame = np.arange(len(ground_truth.frame_ids), dtype=np.int64)
+    else:
+        gt_position = {frame_id: g for g, frame_id in enumerate(ground_truth.frame_ids)}
+        pred_gt_frame = np.array([gt_position[f] for f in predictions.frame_ids], dtype=np.int64)
     if partial:
         evaluated_frame = np.zeros(len(ground_truth.frame_ids), dtype=bool)
         evaluated_frame[pred_gt_frame] = True
@@ -186,8 +189,8 @@ def score_tables(
         metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": len(band_score) - n_tp}
         metrics["pr_curves"][band] = _curve_json(curve)
 
-    scene_names = [scene_of(ground_truth.frame_ids[g]) for g in pred_gt_frame] if partial else None
-    scenes = sorted(set(scene_names if partial else map(scene_of, ground_truth.frame_ids)))
+    evaluated_ids = predictions.frame_ids if partial else ground_truth.frame_ids
+    scenes = sorted({frame_id.rpartition("/")[0] for frame_id in evaluated_ids})
     metrics["protocol"] = protocol_dict()
     metrics["partial"] = bool(partial)
     metrics["n_frames"] = len(predictions.frame_ids) if partial else len(ground_truth.frame_ids)
