@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import torch
-from torch.utils.data import Dataset
+from torch.utils.data import Dataset, get_worker_info
 
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import SceneReader, frame_id, open_dataset
+from zendar_dataset.format import SceneReader, StoredArray, frame_id, open_dataset
 from zendar_dataset.format.schema import LABEL_FIELD_NAMES
 from zendar_dataset.geometry import LocalENU, PoseInterpolator
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
@@ -78,6 +78,8 @@ class _SceneState:
         self.labels: dict[str, np.ndarray] | None = None
         self.label_times: np.ndarray | None = None
         self.sar_frames: dict[str, dict[str, np.ndarray]] = {}
+        # Opening an array reads its metadata (a file, or a request when remote): once per process.
+        self.arrays: dict[str, StoredArray] = {}
 
 
 class ZendarDataset(Dataset):
@@ -302,6 +304,12 @@ class ZendarDataset(Dataset):
             )
         return state.poses
 
+    def _array(self, scene: int, path: str) -> StoredArray:
+        arrays = self._scene_state(scene).arrays
+        if path not in arrays:
+            arrays[path] = self._readers[scene].array(path)
+        return arrays[path]
+
     def _labels_at(self, scene: int, timestamp_ns: int) -> dict[str, np.ndarray]:
         state = self._scene_state(scene)
         if state.labels is None:
@@ -323,6 +331,30 @@ class ZendarDataset(Dataset):
 
     def __getitem__(self, index: int) -> Any:
         scene, row = self._locate(index)
+        return self._item(scene, row, {})
+
+    def __getitems__(self, indices: Sequence[int]) -> list[Any]:
+        """Items of one batch (called by the DataLoader): each radar's windows are read
+        straight into one batch buffer, in shared memory inside a worker, so that
+        :meth:`collate` and the transfer to the main process copy nothing."""
+        located = [self._locate(i) for i in indices]
+        buffers: list[dict[str, np.ndarray]] = [{} for _ in located]
+        radar_streams = {n for scene, _ in located for n in self._tables[scene].streams if n.startswith("radar/")}
+        for name in sorted(radar_streams):
+            shapes = set()
+            for scene, row in located:
+                table = self._tables[scene]
+                if name not in table.element or table.element[name][row] == MISSING:
+                    break
+                shapes.add(self._array(scene, f"{name}/cube").shape[1:])
+            else:
+                if len(shapes) == 1:
+                    batch = _batch_buffer((len(located), self.cube_window, *shapes.pop()), np.complex64)
+                    for b, out in enumerate(batch):
+                        buffers[b][name] = out
+        return [self._item(scene, row, out) for (scene, row), out in zip(located, buffers)]
+
+    def _item(self, scene: int, row: int, buffers: dict[str, np.ndarray]) -> Any:
         reader = self._readers[scene]
         table = self._tables[scene]
         timestamp_ns = int(table.timestamp_ns[row])
@@ -340,7 +372,7 @@ class ZendarDataset(Dataset):
             group, _, sensor = name.partition("/")
             if group in SENSOR_GROUPS:
                 item.setdefault(group, {})[sensor] = (
-                    self._read_sensor(scene, group, sensor, element) if present else None
+                    self._read_sensor(scene, group, sensor, element, buffers.get(name)) if present else None
                 )
             elif group == "tracklog":
                 self._add_poses(item, scene, timestamp_ns, present)
@@ -371,25 +403,31 @@ class ZendarDataset(Dataset):
         item["ecef_T_ego"] = poses.ecef_T_ego(timestamp_ns).as_matrix()
         item["enu_T_ego"] = poses.enu_T_ego(timestamp_ns).as_matrix()
 
-    def _read_sensor(self, scene: int, group: str, sensor: str, element: int) -> dict[str, Any]:
+    def _read_sensor(
+        self, scene: int, group: str, sensor: str, element: int, out: np.ndarray | None = None
+    ) -> dict[str, Any]:
+        """One stream's element; ``out`` is a preallocated [K, R, D, A] buffer for radar windows."""
         reader = self._readers[scene]
         stream = f"{group}/{sensor}"
         times = reader.timestamps(stream)
         if group == "radar":
             start = element - self.cube_window + 1
-            return {
-                "cube": reader.array(f"{stream}/cube")[start : element + 1],
-                "timestamp_ns": times[start : element + 1].copy(),
-            }
-        out: dict[str, Any] = {"timestamp_ns": int(times[element])}
+            cubes = self._array(scene, f"{stream}/cube")
+            if out is None:
+                cube = cubes[start : element + 1]
+            else:
+                _read_frames_into(cubes, start, element + 1, out)
+                cube = out
+            return {"cube": cube, "timestamp_ns": times[start : element + 1].copy()}
+        frame: dict[str, Any] = {"timestamp_ns": int(times[element])}
         if group == "sar":
-            out["image"] = reader.array(f"{stream}/image")[element]
-            out.update(self._sar_frame(scene, sensor, element))
+            frame["image"] = self._array(scene, f"{stream}/image")[element]
+            frame.update(self._sar_frame(scene, sensor, element))
         elif group == "camera":
-            out["image"] = reader.array(f"{stream}/image")[element]
+            frame["image"] = self._array(scene, f"{stream}/image")[element]
         elif group == "lidar":
-            out["points"] = reader.lidar_points(sensor, element)
-        return out
+            frame["points"] = reader.lidar_points(sensor, element)
+        return frame
 
     # -- batching ----------------------------------------------------------------
     @staticmethod
@@ -405,6 +443,61 @@ class ZendarDataset(Dataset):
         if not batch:
             raise ValueError("collate needs at least one item")
         return _collate(list(batch), path=())
+
+
+def _read_frames_into(array: StoredArray, start: int, stop: int, out: np.ndarray) -> None:
+    """Read frames ``start:stop`` of ``array`` into ``out`` without an intermediate copy
+    where the store allows it (a local raw chunk per frame), else through the reader."""
+    direct = getattr(array, "_direct", None)
+    locate = getattr(direct, "_locate", None)
+    frame_bytes = getattr(direct, "frame_bytes", None)
+    if locate is None or out.dtype != array.dtype or not out.flags.c_contiguous:
+        out[...] = array[start:stop]
+        return
+    flat = out.reshape(stop - start, -1).view(np.uint8)
+    for row, frame in enumerate(range(start, stop)):
+        try:
+            path, offset, size = locate(frame)
+            if size != frame_bytes:
+                raise ValueError(f"chunk of frame {frame} holds {size} bytes, expected {frame_bytes}")
+            with open(path, "rb", buffering=0) as handle:
+                handle.seek(offset)
+                got = handle.readinto(flat[row])
+            if got != frame_bytes:
+                raise ValueError(f"chunk of frame {frame} is truncated: read {got} of {frame_bytes} bytes")
+        except (OSError, ValueError) as exc:
+            raise ZendarFormatError(
+                f"{array.scene_id}: {array.path}: expected readable {array.dtype.name} chunks, "
+                f"found a truncated or corrupt chunk ({exc})"
+            ) from exc
+
+
+def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+    """An uninitialised array backed by a torch tensor, in shared memory inside a
+    DataLoader worker (as torch's own collate does), so sending it costs no copy."""
+    torch_dtype = torch.from_numpy(np.zeros(0, dtype=dtype)).dtype
+    if get_worker_info() is None:
+        # numpy's allocator reuses freed batch memory (no fresh page faults per batch).
+        return torch.from_numpy(np.empty(shape, dtype=dtype)).numpy()
+    nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
+    storage = torch.UntypedStorage._new_shared(nbytes)
+    return torch.empty(0, dtype=torch_dtype).set_(storage, 0, shape).numpy()
+
+
+def _batch_tensor(values: list[Any]) -> torch.Tensor | None:
+    """The tensor behind ``values`` when they are exactly the rows of one batch buffer."""
+    base = values[0].base if isinstance(values[0], np.ndarray) else None
+    if not isinstance(base, np.ndarray) or not isinstance(base.base, torch.Tensor):
+        return None
+    if base.shape[0] != len(values) or not base.flags.c_contiguous:
+        return None
+    start = base.__array_interface__["data"][0]
+    for b, v in enumerate(values):
+        if not (isinstance(v, np.ndarray) and v.base is base and v.shape == base.shape[1:]
+                and v.__array_interface__["data"][0] == start + b * base.strides[0]):
+            return None
+    tensor = base.base
+    return tensor if tuple(tensor.shape) == base.shape else None
 
 
 def _to_tensor(value: Any) -> Any:
@@ -430,6 +523,9 @@ def _collate(values: list[Any], path: tuple[str, ...]) -> Any:
     if path and path[0] in VARIABLE_LENGTH_GROUPS:
         return [_to_tensor(v) for v in values]
     if isinstance(first, np.ndarray):
+        batched = _batch_tensor(values)
+        if batched is not None:
+            return batched
         if all(isinstance(v, np.ndarray) and v.shape == first.shape and v.dtype == first.dtype for v in values):
             return torch.from_numpy(np.stack(values))
         return [_to_tensor(v) for v in values]

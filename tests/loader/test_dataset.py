@@ -226,3 +226,36 @@ def test_bad_root_split_scene_and_arguments(dataset_root, tmp_path):
         ZendarDataset(dataset_root, streams=("sar", "camera"), tolerance_ms={"lidar": 5.0})
     with pytest.raises(ValueError, match="cube_window"):
         ZendarDataset(dataset_root, streams=("radar",), cube_window=0)
+
+
+def test_batched_reads_match_items_and_collate_without_copy(dataset_root):
+    ds = ZendarDataset(dataset_root, split="train", streams=("radar", "labels"), cube_window=2)
+    indices = [0, 5, 9, 12]  # across both scenes
+    items = ds.__getitems__(indices)
+    for index, item in zip(indices, items):
+        single = ds[index]
+        assert item["frame_id"] == single["frame_id"]
+        np.testing.assert_array_equal(item["radar"]["left"]["cube"], single["radar"]["left"]["cube"])
+        np.testing.assert_array_equal(item["radar"]["right"]["timestamp_ns"], single["radar"]["right"]["timestamp_ns"])
+    batch = ZendarDataset.collate(items)
+    cube = batch["radar"]["left"]["cube"]
+    assert cube.shape == (4, 2, R, D, A)
+    # The batch tensor is the buffer the items were read into.
+    assert cube.data_ptr() == items[0]["radar"]["left"]["cube"].__array_interface__["data"][0]
+    # A transform that replaces an array falls back to stacking a copy.
+    items[1]["radar"]["left"]["cube"] = items[1]["radar"]["left"]["cube"] * 2
+    restacked = ZendarDataset.collate(items)["radar"]["left"]["cube"]
+    np.testing.assert_array_equal(restacked[1].numpy(), 2 * ds[5]["radar"]["left"]["cube"])
+
+
+def test_truncated_cube_chunk_raises_format_error(tmp_path):
+    from conftest import make_dataset
+
+    root = make_dataset(tmp_path / "ds", "zarr")
+    chunk = root / "scenes" / "alpha.zarr" / "radar" / "left" / "cube" / "c" / "4" / "0" / "0" / "0"  # frame 2 (200 ms) reads cube 4 (190 ms)
+    chunk.write_bytes(chunk.read_bytes()[:100])
+    ds = ZendarDataset(root, split="train", streams=("radar",))
+    with pytest.raises(ZendarFormatError, match=r"alpha: radar/left/cube.*truncated"):
+        ds.__getitems__([2, 1])
+    with pytest.raises(ZendarFormatError, match=r"alpha: radar/left/cube"):
+        ds[2]
