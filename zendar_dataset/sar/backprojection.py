@@ -179,6 +179,7 @@ def _backproject_torch(
     positions_t = torch.tensor(positions, device=device)
     dj_t = torch.tensor(grid.dj, device=device)
     offsets_px = torch.arange(seg_px, device=device, dtype=torch.float32) - (seg_px - 1) / 2
+    odd_px = 2 * offsets_px  # odd integers: 2·m
     dj_norm2 = float(grid.dj @ grid.dj)
     inv_bin = 1.0 / range_bin_m
     # Flattened (re, im) samples; pulse p's sample r is row p·R + r.
@@ -199,14 +200,20 @@ def _backproject_torch(
             # Per (segment, pulse), float64: [t, p].
             d = positions_t[None, pulses, :] - centers_t[tiles, None, :]
             r_ref = torch.linalg.vector_norm(d, dim=-1)
-            b = (2.0 * (d @ dj_t)).float()[..., None]
+            b = 2.0 * (d @ dj_t)
             ref_cycles = r_ref * cycles_per_m
             ref_cycles = (ref_cycles - torch.floor(ref_cycles)).float()[..., None]
+            # Linear phase term, turns per half pixel, reduced to [-0.5, 0.5).
+            half_step = -0.25 * cycles_per_m * b / (r_ref + 1e-300)
+            half_step = (half_step - torch.round(half_step)).float()[..., None]
+            b_over_2r = (0.5 * b / (r_ref + 1e-300)).float()[..., None]
             base_index = ((r_ref - range_offset_m) * inv_bin).float()[..., None]
+            b = b.float()[..., None]
             r_ref = r_ref.float()[..., None]
             # Per pixel, float32: [t, p, seg_px].
             s = offsets_px * (offsets_px * dj_norm2 - b)
-            delta_r = s / (torch.sqrt(r_ref * r_ref + s) + r_ref)
+            inv_sum = 1.0 / (torch.sqrt(r_ref * r_ref + s) + r_ref + 1e-30)
+            delta_r = s * inv_sum
             index = base_index + delta_r * inv_bin
             valid = (index >= 0) & (index <= num_samples - 1)
             index = index.clamp(0, num_samples - 1)
@@ -215,7 +222,10 @@ def _backproject_torch(
             rows = lower.long() + pulse_rows[pulses, None]
             lo = samples_ri[rows]
             value = (lo + weight * (samples_ri[rows + 1] - lo)) * valid[..., None]
-            cycles = ref_cycles + delta_r * cycles_per_m
+            # R − R_ref minus its linear part m·g (g = −b / 2R_ref) is small and
+            # accurate in float32; the linear part's phase comes reduced.
+            curved_r = (offsets_px * offsets_px * dj_norm2 + offsets_px * b_over_2r * delta_r) * inv_sum
+            cycles = ref_cycles + odd_px * half_step + curved_r * cycles_per_m
             angle = (2 * math.pi) * (cycles - torch.round(cycles))
             cos, sin = torch.cos(angle), torch.sin(angle)
             # value · exp(−j·angle)

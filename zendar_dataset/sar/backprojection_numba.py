@@ -95,8 +95,10 @@ def _kernel(
         cy = origin[1] + row * di[1] + center_col * dj[1]
         cz = origin[2] + row * di[2] + center_col * dj[2]
         offsets = np.empty(seg_px, dtype=np.float32)
+        odd = np.empty(seg_px, dtype=np.float32)
         for q in range(seg_px):
             offsets[q] = np.float32(q - (seg_px - 1) / 2)
+            odd[q] = np.float32(2 * q - (seg_px - 1))
         acc_re = np.zeros(seg_px, dtype=np.float32)
         acc_im = np.zeros(seg_px, dtype=np.float32)
         lower = np.empty(seg_px, dtype=np.uint32)
@@ -114,24 +116,34 @@ def _kernel(
             dy = positions[p, 1] - cy
             dz = positions[p, 2] - cz
             r_ref64 = math.sqrt(dx * dx + dy * dy + dz * dz)
-            b = np.float32(2.0 * (dj[0] * dx + dj[1] * dy + dj[2] * dz))
+            b64 = 2.0 * (dj[0] * dx + dj[1] * dy + dj[2] * dz)
+            b = np.float32(b64)
             ref_turns64 = r_ref64 * cycles_per_m
             ref_turns = np.float32(ref_turns64 - math.floor(ref_turns64))
+            # Linear phase term, turns per half pixel, reduced to [-0.5, 0.5).
+            half_step_turns64 = -0.25 * b64 / (r_ref64 + 1e-300) * cycles_per_m
+            half_step_turns = np.float32(half_step_turns64 - math.floor(half_step_turns64 + 0.5))
             base_index = np.float32((r_ref64 - range_offset_m) * inv_bin)
             r_ref = np.float32(r_ref64)
             r_ref2 = r_ref * r_ref
+            b_over_2r = np.float32(0.5 * b64 / (r_ref64 + 1e-300))
             # Geometry, interpolation weights and phase rotation: SIMD.
             for q in range(seg_px):
                 m = offsets[q]
                 s = m * (m * dj_norm2 - b)
-                delta_r = s / (np.sqrt(r_ref2 + s) + r_ref + tiny)
+                inv_sum = np.float32(1.0) / (np.sqrt(r_ref2 + s) + r_ref + tiny)
+                delta_r = s * inv_sum
                 index = base_index + delta_r * inv_bin32
+                # R − R_ref minus its linear part m·g, g = −b / 2R_ref: small, so
+                # accurate in float32; the linear part's phase comes reduced.
+                curved_r = (m * m * dj_norm2 + m * b_over_2r * delta_r) * inv_sum
+                turns = ref_turns + odd[q] * half_step_turns + curved_r * cycles32
                 inside = np.float32((index >= np.float32(0.0)) & (index <= last))
                 index = min(max(index, np.float32(0.0)), last)
                 low = min(np.uint32(index), max_lower)
                 lower[q] = low
                 weight[q] = index - np.float32(low)
-                c, s_neg = _cis_neg_turns(ref_turns + delta_r * cycles32)
+                c, s_neg = _cis_neg_turns(turns)
                 rot_re[q] = c * inside
                 rot_im[q] = s_neg * inside
             # Indexed loads: scalar, as gathers do not pay on every x86 target.

@@ -10,10 +10,16 @@ exact even in ECEF) and ``R_ref = |d|`` (float64), the pixel's range obeys exact
 
 so the per-pixel float32 arithmetic only ever sees the small difference
 ``R − R_ref`` (at most half a segment), never a range of tens of metres nor an ECEF
-coordinate of millions. The phase ``4π·R/λ`` is split the same way: the
-fractional cycles of ``2·R_ref/λ`` come from float64, the rest from the small
-float32 difference. The float32 phase error stays ~1e-4 rad, against ~1e-2 rad for
-ranges formed in float32 from positions relative to a single image-wide reference.
+coordinate of millions. The phase, ``2·R/λ`` turns, is split further so no float32
+value carries many whole turns:
+
+    2R/λ = 2R_ref/λ + m·g·2/λ + (R − R_ref − m·g)·2/λ,   g = −dj·d / R_ref,
+
+the first two reduced modulo one turn in float64 (the second per half pixel, as
+``2m`` is an odd integer), the third, the segment's curvature
+``(m²·|dj|² + m·(b/2R_ref)·(R − R_ref)) / (R + R_ref)`` with ``b = 2·dj·d``, small.
+The phase error stays ~1e-5 turn, against ~1e-2 rad for ranges formed in float32
+from positions relative to a single image-wide reference.
 """
 
 from __future__ import annotations

@@ -1,0 +1,205 @@
+"""Backprojection throughput in G pixel·pulses/s: numpy reference, torch, numba kernel.
+
+    python benchmarks/bench_sar.py                 # CPU: numpy per pulse, torch, numba (two loop orders)
+    python benchmarks/bench_sar.py --device cuda   # adds torch on the GPU
+
+All methods image the same scene (paper geometry: 4 cm pixels, 2 m aperture, 77 GHz)
+in the same run; slow methods run on a subset of pulses and are scaled, which is
+fair since the work is linear in pulses. Accuracy of each method is reported
+against the float64 numpy reference on a common subset (max |Δ| / max |image|);
+random profiles make this a harsher test than a focused scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numba
+import numpy as np
+import torch
+
+from zendar_dataset.sar import ImageGrid, backproject
+from zendar_dataset.sar.backprojection import SPEED_OF_LIGHT_MPS
+from zendar_dataset.sar.backprojection_numba import _cis_neg_turns
+from zendar_dataset.sar.segments import segment_length_px
+
+CENTER_FREQUENCY_HZ = 77e9
+RANGE_BIN_M = 0.0375
+RANGE_OFFSET_M = 2.0
+
+
+def make_scene(height: int, width: int, num_pulses: int, num_samples: int):
+    rng = np.random.default_rng(0)
+    profiles = (rng.standard_normal((num_pulses, num_samples)) + 1j * rng.standard_normal((num_pulses, num_samples)))
+    positions = np.zeros((num_pulses, 3))
+    positions[:, 0] = np.linspace(-1.0, 1.0, num_pulses)
+    positions[:, 2] = 0.5
+    grid = ImageGrid.axis_aligned([0.0, 14.0, 0.0], [0, 1, 0], [1, 0, 0], 0.04, (height, width))
+    return profiles.astype(np.complex64), positions, grid
+
+
+def numpy_per_pulse(profiles, positions, grid):
+    """The plain reference: one vectorised numpy pass over all pixels per pulse."""
+    pixels = grid.pixel_centers()
+    sample_ranges_m = RANGE_OFFSET_M + RANGE_BIN_M * np.arange(profiles.shape[1])
+    cycles_per_m = 2 * CENTER_FREQUENCY_HZ / SPEED_OF_LIGHT_MPS
+    image = np.zeros(grid.shape, dtype=np.complex128)
+    for profile, position in zip(profiles, positions):
+        r = np.linalg.norm(pixels - position, axis=-1)
+        value = np.interp(r, sample_ranges_m, profile.real, left=0, right=0) + 1j * np.interp(
+            r, sample_ranges_m, profile.imag, left=0, right=0
+        )
+        image += value * np.exp(-2j * np.pi * cycles_per_m * r)
+    return image
+
+
+@numba.njit(parallel=True, fastmath=True, error_model="numpy")
+def _pulses_inner_kernel(profiles, positions, origin, di, dj, height, width, seg_px, inv_bin, range_offset_m,
+                         cycles_per_m, out):
+    """The other loop order: per pixel, SIMD over pulses (same arithmetic as the package kernel)."""
+    num_pulses, num_samples = profiles.shape
+    num_segments = (width + seg_px - 1) // seg_px
+    dj_norm2 = np.float32(dj[0] * dj[0] + dj[1] * dj[1] + dj[2] * dj[2])
+    last = np.float32(num_samples - 1)
+    max_lower = np.uint32(num_samples - 2)
+    tiny = np.float32(1e-30)
+    for tile in numba.prange(height * num_segments):
+        row = tile // num_segments
+        col0 = (tile % num_segments) * seg_px
+        center_col = col0 + (seg_px - 1) / 2
+        b = np.empty(num_pulses, np.float32)
+        r_ref = np.empty(num_pulses, np.float32)
+        ref_turns = np.empty(num_pulses, np.float32)
+        base_index = np.empty(num_pulses, np.float32)
+        half_step = np.empty(num_pulses, np.float32)
+        b_over_2r = np.empty(num_pulses, np.float32)
+        for p in range(num_pulses):
+            dx = positions[p, 0] - (origin[0] + row * di[0] + center_col * dj[0])
+            dy = positions[p, 1] - (origin[1] + row * di[1] + center_col * dj[1])
+            dz = positions[p, 2] - (origin[2] + row * di[2] + center_col * dj[2])
+            r64 = math.sqrt(dx * dx + dy * dy + dz * dz)
+            b[p] = 2.0 * (dj[0] * dx + dj[1] * dy + dj[2] * dz)
+            turns = r64 * cycles_per_m
+            ref_turns[p] = turns - math.floor(turns)
+            base_index[p] = (r64 - range_offset_m) * inv_bin
+            r_ref[p] = r64
+            h = -0.25 * b[p] / (r64 + 1e-300) * cycles_per_m
+            half_step[p] = h - math.floor(h + 0.5)
+            b_over_2r[p] = 0.5 * b[p] / (r64 + 1e-300)
+        lower = np.empty(num_pulses, np.uint32)
+        weight = np.empty(num_pulses, np.float32)
+        rot_re = np.empty(num_pulses, np.float32)
+        rot_im = np.empty(num_pulses, np.float32)
+        pairs_lo = np.empty(num_pulses, np.uint64)
+        pairs_hi = np.empty(num_pulses, np.uint64)
+        lo = pairs_lo.view(np.float32)
+        hi = pairs_hi.view(np.float32)
+        for q in range(min(seg_px, width - col0)):
+            m = np.float32(q - (seg_px - 1) / 2)
+            odd = np.float32(2 * q - (seg_px - 1))
+            for p in range(num_pulses):
+                s = m * (m * dj_norm2 - b[p])
+                inv_sum = np.float32(1.0) / (np.sqrt(r_ref[p] * r_ref[p] + s) + r_ref[p] + tiny)
+                delta_r = s * inv_sum
+                curved_r = (m * m * dj_norm2 + m * b_over_2r[p] * delta_r) * inv_sum
+                index = base_index[p] + delta_r * np.float32(inv_bin)
+                inside = np.float32((index >= np.float32(0.0)) & (index <= last))
+                index = min(max(index, np.float32(0.0)), last)
+                low = min(np.uint32(index), max_lower)
+                lower[p] = low
+                weight[p] = index - np.float32(low)
+                turns = ref_turns[p] + odd * half_step[p] + curved_r * np.float32(cycles_per_m)
+                c, s_neg = _cis_neg_turns(turns)
+                rot_re[p] = c * inside
+                rot_im[p] = s_neg * inside
+            for p in range(num_pulses):
+                pairs_lo[p] = profiles[p, lower[p]]
+                pairs_hi[p] = profiles[p, lower[p] + 1]
+            acc_re = np.float32(0.0)
+            acc_im = np.float32(0.0)
+            for p in range(num_pulses):
+                w = weight[p]
+                v_re = lo[2 * p] + w * (hi[2 * p] - lo[2 * p])
+                v_im = lo[2 * p + 1] + w * (hi[2 * p + 1] - lo[2 * p + 1])
+                acc_re += v_re * rot_re[p] - v_im * rot_im[p]
+                acc_im += v_re * rot_im[p] + v_im * rot_re[p]
+            out[row, col0 + q] = acc_re + 1j * acc_im
+
+
+def pulses_inner(profiles, positions, grid):
+    out = np.empty(grid.shape, dtype=np.complex64)
+    _pulses_inner_kernel(profiles.view(np.uint64), positions, grid.origin, grid.di, grid.dj, *grid.shape,
+                         segment_length_px(grid.dj), 1 / RANGE_BIN_M, RANGE_OFFSET_M,
+                         2 * CENTER_FREQUENCY_HZ / SPEED_OF_LIGHT_MPS, out)
+    return out
+
+
+def package(backend, device=None):
+    def run(profiles, positions, grid):
+        if device is not None:
+            profiles = torch.from_numpy(profiles).to(device)
+        image = backproject(profiles, positions, grid, range_bin_m=RANGE_BIN_M,
+                            center_frequency_hz=CENTER_FREQUENCY_HZ, range_offset_m=RANGE_OFFSET_M,
+                            backend=backend, device=device)
+        if isinstance(image, torch.Tensor):
+            if image.device.type == "cuda":
+                torch.cuda.synchronize()
+            image = image.cpu().numpy()
+        return image
+    return run
+
+
+def best_time(fn, args, repeats: int) -> float:
+    fn(*args)  # warm-up: JIT compilation, caches
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn(*args)
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--size", type=int, default=512, help="image is size x size pixels")
+    parser.add_argument("--pulses", type=int, default=512)
+    parser.add_argument("--samples", type=int, default=1024)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--device", default="cpu", help="'cuda' adds torch on the GPU")
+    args = parser.parse_args()
+
+    profiles, positions, grid = make_scene(args.size, args.size, args.pulses, args.samples)
+    methods = [
+        ("numpy per pulse (reference)", numpy_per_pulse, 8),
+        ("torch CPU", package("torch"), 32),
+        ("numba, pulses inner", pulses_inner, args.pulses),
+        ("numba kernel (package default)", package("numba"), args.pulses),
+    ]
+    if args.device != "cpu":
+        if args.device.startswith("cuda") and not torch.cuda.is_available():
+            print(f"--device {args.device}: no CUDA device here, GPU throughput not measured")
+        else:
+            methods.append((f"torch {args.device}", package("torch", args.device), args.pulses))
+
+    # Accuracy on a common subset of pulses, against the float64 numpy reference.
+    check = slice(0, 32)
+    reference = numpy_per_pulse(profiles[check], positions[check], grid)
+    scale = np.abs(reference).max()
+
+    print(f"image {args.size}x{args.size}, {args.pulses} pulses, {args.samples} range samples, "
+          f"{numba.get_num_threads()} numba threads, {torch.get_num_threads()} torch threads")
+    print(f"{'method':34s} {'pulses':>6s} {'seconds':>9s} {'G pix*pulse/s':>14s} {'x numpy':>8s} {'max|d|/max':>11s}")
+    baseline = None
+    for name, fn, pulses in methods:
+        subset = slice(0, pulses)
+        seconds = best_time(fn, (profiles[subset], positions[subset], grid), args.repeats)
+        rate = args.size * args.size * pulses / seconds / 1e9
+        baseline = baseline or rate
+        error = np.abs(fn(profiles[check], positions[check], grid) - reference).max() / scale
+        print(f"{name:34s} {pulses:6d} {seconds:9.3f} {rate:14.3f} {rate / baseline:8.1f} {error:11.1e}")
+
+
+if __name__ == "__main__":
+    main()
