@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+import warnings
 
 import h5py
 import numpy as np
@@ -58,6 +59,14 @@ def dump(path: pathlib.Path) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
     return arrays, attrs
 
 
+def reconsolidate(path: pathlib.Path) -> None:
+    """Refresh zarr consolidated metadata after an edit, as a careful tool would."""
+    if pathlib.Path(path).suffix == ".zarr":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            zarr.consolidate_metadata(str(path))
+
+
 def replace_array(path: pathlib.Path, array_path: str, data: np.ndarray | None) -> None:
     """Delete an array and (unless data is None) write ``data`` in its place."""
     root = open_raw(path, "r+" if pathlib.Path(path).suffix == ".h5" else "a")
@@ -71,6 +80,7 @@ def replace_array(path: pathlib.Path, array_path: str, data: np.ndarray | None) 
     finally:
         if isinstance(root, h5py.File):
             root.close()
+    reconsolidate(path)
 
 
 def set_attr(path: pathlib.Path, node_path: str, key: str, value) -> None:
@@ -84,6 +94,7 @@ def set_attr(path: pathlib.Path, node_path: str, key: str, value) -> None:
     finally:
         if isinstance(root, h5py.File):
             root.close()
+    reconsolidate(path)
 
 
 def corrupt_chunk(path: pathlib.Path, array_path: str, frame: int) -> None:

@@ -139,3 +139,20 @@ def test_scene_id_mismatch_and_missing_store(dataset_root, backend):
     path = _scene_path(dataset_root, "s2", backend)
     shutil.rmtree(path) if path.is_dir() else path.unlink()
     assert "s2: expected a scene store at" in str(_open_error(dataset_root, "s2"))
+
+
+def test_validate_reports_stale_consolidated_metadata(dataset_root, backend):
+    if backend != "zarr":
+        pytest.skip("zarr consolidated metadata")
+    import zarr
+
+    from zendar_dataset.format.validate import validate_scene
+
+    path = _scene_path(dataset_root, "s0", backend)
+    group = zarr.open_group(str(path), mode="a", use_consolidated=False)
+    del group["camera"]  # edited without refreshing the consolidated metadata
+    problems = validate_scene(path, "s0")
+    assert problems == [
+        "s0: zarr.json: expected consolidated metadata matching the store, found 4 differing paths "
+        "(first 'camera'); re-run zarr.consolidate_metadata"
+    ]

@@ -22,6 +22,15 @@ def zendar_data(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([*command, *map(str, args)], capture_output=True, text=True, timeout=300)
 
 
+def in_process(*args: str, capsys) -> tuple[int, str, str]:
+    """The same entry point, called in this process (cheaper than a subprocess)."""
+    from zendar_dataset.cli.data import main
+
+    status = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
 def test_validate_passes_on_written_dataset(dataset_root):
     result = zendar_data("validate", dataset_root)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -73,11 +82,12 @@ def test_validate_finds_missing_and_corrupt_chunks(dataset_root, backend):
     assert "s2: camera/front/image: expected readable chunks, found a truncated or corrupt chunk at rows 0:1" in result.stdout
 
 
-def test_convert_round_trip_is_lossless_and_reads_only(tmp_path):
+@pytest.mark.slow
+def test_convert_round_trip_is_lossless_and_reads_only(tmp_path, capsys):
     source = make_dataset(tmp_path / "zarr", "zarr", seed=3)
     before = tree_digest(source)
     assert zendar_data("convert", source, tmp_path / "h5", "--to", "hdf5").returncode == 0
-    assert zendar_data("convert", tmp_path / "h5", tmp_path / "back", "--to", "zarr").returncode == 0
+    assert in_process("convert", tmp_path / "h5", tmp_path / "back", "--to", "zarr", capsys=capsys)[0] == 0
     assert tree_digest(source) == before
     for scene_id in ("s0", "s1", "s2", "s3"):
         original = dump(source / "scenes" / f"{scene_id}.zarr")
@@ -91,20 +101,21 @@ def test_convert_round_trip_is_lossless_and_reads_only(tmp_path):
     h5_index = open_dataset(tmp_path / "h5")
     assert h5_index.scenes["s0"] == "scenes/s0.h5" and h5_index.splits == open_dataset(source).splits
     assert h5_index.open_scene("s1").array("radar/left/cube").chunks == (1, 16, 8, 4)
-    assert zendar_data("validate", tmp_path / "h5").returncode == 0
+    assert in_process("validate", tmp_path / "h5", capsys=capsys)[0] == 0
 
 
-def test_convert_refuses_non_empty_output(tmp_path):
+def test_convert_refuses_non_empty_output(tmp_path, capsys):
     source = make_dataset(tmp_path / "src", "hdf5")
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    result = zendar_data("convert", source, out, "--to", "zarr")
-    assert result.returncode == 2 and "not an empty directory" in result.stderr
+    status, _, err = in_process("convert", source, out, "--to", "zarr", capsys=capsys)
+    assert status == 2 and "not an empty directory" in err
     assert [p.name for p in out.iterdir()] == ["keep.txt"]
 
 
-def test_export_gt_shape_and_empty_frames(dataset_root, tmp_path):
+@pytest.mark.slow
+def test_export_gt_shape_and_empty_frames(dataset_root, tmp_path, capsys):
     before = tree_digest(dataset_root)
     out = tmp_path / "gt.json"
     result = zendar_data("export-gt", dataset_root, "--split", "train", "-o", out)
@@ -124,12 +135,12 @@ def test_export_gt_shape_and_empty_frames(dataset_root, tmp_path):
     assert sum(len(cars) for cars in frames.values()) == 4
     assert frames == ground_truth_frames(dataset_root, "train")
     # Refuses to replace the file, rejects an unknown split and a split whose labels are withheld.
-    again = zendar_data("export-gt", dataset_root, "--split", "train", "-o", out)
-    assert again.returncode == 2 and "exists already" in again.stderr
-    unknown = zendar_data("export-gt", dataset_root, "--split", "dev", "-o", tmp_path / "x.json")
-    assert unknown.returncode == 2 and "unknown split 'dev'" in unknown.stderr and "Traceback" not in unknown.stderr
-    hidden = zendar_data("export-gt", dataset_root, "--split", "test", "-o", tmp_path / "y.json")
-    assert hidden.returncode == 2 and "found none with labels/moving_cars" in hidden.stderr
+    status, _, err = in_process("export-gt", dataset_root, "--split", "train", "-o", out, capsys=capsys)
+    assert status == 2 and "exists already" in err
+    status, _, err = in_process("export-gt", dataset_root, "--split", "dev", "-o", tmp_path / "x.json", capsys=capsys)
+    assert status == 2 and "unknown split 'dev'" in err and "Traceback" not in err
+    status, _, err = in_process("export-gt", dataset_root, "--split", "test", "-o", tmp_path / "y.json", capsys=capsys)
+    assert status == 2 and "found none with labels/moving_cars" in err
     assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()
-    assert zendar_data("validate", dataset_root).returncode == 0
+    assert in_process("validate", dataset_root, capsys=capsys)[0] == 0
     assert tree_digest(dataset_root) == before

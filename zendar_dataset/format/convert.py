@@ -67,6 +67,8 @@ def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str) -> 
                 _copy_array(node, target.root, path)
     finally:
         target.close()
+    if backend == "zarr":
+        stores.consolidate(target_path)
 
 
 def convert_dataset(

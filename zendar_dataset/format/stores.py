@@ -21,6 +21,7 @@ import json
 import os
 import pathlib
 import sys
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,9 +106,29 @@ def create_store(path: pathlib.Path, backend: str) -> OpenStore:
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
 
 
-def open_store(location: str | os.PathLike, storage_options: dict | None = None) -> OpenStore:
-    """Open a scene store read-only from a local path or an fsspec URL."""
+def consolidate(path: pathlib.Path) -> None:
+    """Write zarr consolidated metadata, so a remote reader opens a scene in one request.
+
+    Consolidated metadata is a zarr-python convention, not yet part of the Zarr v3
+    specification (hence the warning we silence); other readers ignore it, and
+    ours uses it only for URLs (local metadata reads are cheap and always current).
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part")
+        zarr.consolidate_metadata(zarr.storage.LocalStore(str(path)))
+
+
+def open_store(
+    location: str | os.PathLike, storage_options: dict | None = None, *, consolidated: bool | None = None
+) -> OpenStore:
+    """Open a scene store read-only from a local path or an fsspec URL.
+
+    ``consolidated`` (zarr only): use consolidated metadata; by default for URLs
+    when present, never for local paths.
+    """
     backend = backend_from_path(location)
+    if consolidated is None:
+        consolidated = None if is_url(location) else False
     if backend == "zarr":
         if is_url(location):
             store = zarr.storage.FsspecStore.from_url(
@@ -118,7 +139,9 @@ def open_store(location: str | os.PathLike, storage_options: dict | None = None)
             if not os.path.isdir(path):
                 raise FileNotFoundError(path)
             store = zarr.storage.LocalStore(path, read_only=True)
-        root = zarr.open_group(store, mode="r", zarr_format=3, use_consolidated=False)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part")
+            root = zarr.open_group(store, mode="r", zarr_format=3, use_consolidated=consolidated)
         return OpenStore(backend, root)
     if is_url(location):
         fs, fs_path = fsspec.core.url_to_fs(str(location), **(storage_options or {}))
@@ -324,3 +347,23 @@ def direct_frame_reader(array: Any) -> DirectFrameReader | None:
 
         return DirectFrameReader(shape[1:], dtype, locate_hdf5)
     return None
+
+
+def consolidated_mismatches(location: str | os.PathLike, storage_options: dict | None = None) -> list[str] | None:
+    """Paths whose consolidated metadata differs from the store (None without consolidated metadata)."""
+    if backend_from_path(location) != "zarr":
+        return None
+    try:
+        consolidated = open_store(location, storage_options, consolidated=True)
+    except ValueError:
+        return None  # no consolidated metadata
+    actual = open_store(location, storage_options, consolidated=False)
+
+    def summary(root: Any) -> dict[str, tuple]:
+        return {
+            path: (tuple(node.shape), str(node.dtype)) if is_array(node) else ("group",)
+            for path, node in walk(root)
+        }
+
+    want, have = summary(actual.root), summary(consolidated.root)
+    return sorted(path for path in set(want) | set(have) if want.get(path) != have.get(path))

@@ -147,15 +147,22 @@ def validate_scene(
     location = os.fspath(location)
     scene = scene_id or location
     try:
-        store = stores.open_store(location, storage_options)
+        store = stores.open_store(location, storage_options, consolidated=False)
     except FileNotFoundError:
         return [f"{scene}: /: expected a scene store at {location}, found none"]
     except (OSError, ValueError) as exc:
         return [f"{scene}: /: expected a readable zarr v3 or HDF5 store at {location}, found {type(exc).__name__}: {exc}"]
     try:
-        return _validate_open_store(store, scene, scene_id)
+        problems = _validate_open_store(store, scene, scene_id)
     finally:
         store.close()
+    stale = stores.consolidated_mismatches(location, storage_options)
+    if stale:
+        problems.append(
+            f"{scene}: zarr.json: expected consolidated metadata matching the store, found {len(stale)} "
+            f"differing paths (first {stale[0]!r}); re-run zarr.consolidate_metadata"
+        )
+    return problems
 
 
 def validate_dataset(root: str | os.PathLike, storage_options: dict | None = None) -> list[str]:

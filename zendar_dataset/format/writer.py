@@ -435,6 +435,8 @@ class SceneWriter:
         try:
             self._finish_streams()
             self._store.close()
+            if self.backend == "zarr":
+                stores.consolidate(self._temp_path)
             self._closed = True
             self._publish()
         except BaseException:
