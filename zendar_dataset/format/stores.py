@@ -338,12 +338,15 @@ def direct_frame_reader(array: Any) -> DirectFrameReader | None:
         filename = array.file.filename
         zeros = (0,) * (len(shape) - 1)
         chunk_id = array.id
+        located: dict[int, tuple[str, int, int]] = {}  # the B-tree lookup costs as much as the read
 
         def locate_hdf5(frame: int) -> tuple[str, int, int]:
-            info = chunk_id.get_chunk_info_by_coord((frame, *zeros))
-            if info.byte_offset is None:
-                raise ValueError(f"chunk of frame {frame} is not stored")
-            return filename, int(info.byte_offset), int(info.size)
+            if frame not in located:
+                info = chunk_id.get_chunk_info_by_coord((frame, *zeros))
+                if info.byte_offset is None:
+                    raise ValueError(f"chunk of frame {frame} is not stored")
+                located[frame] = (filename, int(info.byte_offset), int(info.size))
+            return located[frame]
 
         return DirectFrameReader(shape[1:], dtype, locate_hdf5)
     return None
