@@ -5,7 +5,9 @@ from radar_helpers import ula_params
 from zendar_dataset.radar.cfar import (
     METHODS,
     CfarWindow,
+    _os_detect_kernel,
     cfar_2d,
+    cfar_alpha,
     default_os_rank,
     detect,
     ordered_statistic_reference,
@@ -63,6 +65,83 @@ def test_os_matches_scipy_rank_filter():
     result = cfar_2d(power, method="os", guard=GUARD, train=TRAIN, os_rank=rank)
     scale = np.sum(1.0 / (window.n_train - np.arange(rank)))
     np.testing.assert_allclose(result.noise_power * scale, ordered_statistic_reference(power, window, rank), rtol=1e-12)
+
+
+def _os_mask_by_definition(power, guard, train, rank, alpha, edge):
+    """OS-CFAR by its definition: per cell, sort the training ring, test ``x_cut > alpha * X_(k)``."""
+    (gr, gd), (tr, td) = guard, train
+    hr, hd = gr + tr, gd + td
+    n_r, n_d = power.shape
+    mask = np.zeros(power.shape, dtype=bool)
+    for r in range(n_r):
+        if edge == "valid-range" and not hr <= r < n_r - hr:
+            continue
+        for d in range(n_d):
+            ring = []
+            for dr in range(-hr, hr + 1):
+                for dd in range(-hd, hd + 1):
+                    if abs(dr) <= gr and abs(dd) <= gd:
+                        continue
+                    if edge == "wrap":
+                        rr = (r + dr) % n_r
+                    else:
+                        rr = abs(r + dr)
+                        rr = 2 * (n_r - 1) - rr if rr > n_r - 1 else rr
+                    ring.append(float(power[rr, (d + dd) % n_d]))
+            mask[r, d] = power[r, d] > alpha * sorted(ring)[rank - 1]
+    return mask
+
+
+OS_WINDOWS = [((1, 1), (2, 2)), ((2, 1), (4, 3)), ((0, 0), (1, 1)), ((1, 0), (2, 0)), ((0, 2), (3, 1))]
+
+
+@pytest.mark.parametrize("edge", ["wrap-doppler", "wrap", "valid-range"])
+@pytest.mark.parametrize(("guard", "train"), OS_WINDOWS)
+def test_os_counting_mask_equals_the_definition_on_tied_maps(guard, train, edge):
+    # Integer-valued maps: many ties inside the ring and between the CUT and the ring.
+    rng = np.random.default_rng(sum(guard) * 10 + sum(train))
+    n = CfarWindow(*guard, *train).n_train
+    for trial, rank in enumerate(sorted({1, 2, default_os_rank(n), n - 1, n})):
+        power = rng.integers(0, 4 + 8 * trial, size=(2, 26, 17)).astype(np.float64)
+        power[:, 5, 3] = 60.0  # a certain detection
+        pfa = [0.3, 0.05, 1e-3][trial % 3]
+        result = cfar_2d(power, method="os", guard=guard, train=train, os_rank=rank, pfa=pfa, edge=edge)
+        alpha = cfar_alpha("os", n, pfa, rank)
+        for i in range(2):
+            expected = _os_mask_by_definition(power[i], guard, train, rank, alpha, edge)
+            np.testing.assert_array_equal(result.mask[i], expected)
+        # the mask agrees with the full threshold map computed on demand
+        np.testing.assert_array_equal(result.mask, power > result.threshold)
+
+
+@pytest.mark.parametrize("alpha", [0.5, 1.0, 2.0, 3.0])
+def test_os_counting_kernel_is_strict_at_exact_ties(alpha):
+    # Factors that make alpha * X_(k) equal to the CUT on integer maps, where ">" versus ">=" matters.
+    rng = np.random.default_rng(int(alpha * 10))
+    guard, train = (1, 1), (2, 2)
+    window = CfarWindow(*guard, *train)
+    power = rng.integers(0, 5, size=(20, 15)).astype(np.float64)
+    rows = np.abs(np.arange(-window.half_range, 20 + window.half_range))
+    rows = np.where(rows > 19, 38 - rows, rows)
+    cols = np.arange(-window.half_doppler, 15 + window.half_doppler) % 15
+    padded = np.ascontiguousarray(power[rows][:, cols])[None]
+    for rank in (1, 7, 20, window.n_train):
+        mask = np.empty((1, 20, 15), dtype=bool)
+        _os_detect_kernel(padded, alpha, 1, 1, window.half_range, window.half_doppler, rank, mask)
+        expected = _os_mask_by_definition(power, guard, train, rank, alpha, "wrap-doppler")
+        np.testing.assert_array_equal(mask[0], expected)
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("edge", ["wrap-doppler", "valid-range"])
+def test_noise_power_at_cells_equals_the_full_map(method, edge):
+    rng = np.random.default_rng(11)
+    power = rng.exponential(size=(2, 40, 24))
+    result = cfar_2d(power, method=method, guard=GUARD, train=TRAIN, pfa=0.05, edge=edge)
+    index = np.nonzero(result.mask | (rng.random(power.shape) < 0.05))
+    at_cells = result.noise_power_at(*index)  # before the full map exists (OS computes it lazily)
+    np.testing.assert_array_equal(at_cells, result.noise_power[index])
+    assert np.isnan(result.noise_power_at(np.array([0]), np.array([0]), np.array([3]))[0]) == (edge == "valid-range")
 
 
 @pytest.mark.parametrize("method", METHODS)

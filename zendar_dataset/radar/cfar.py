@@ -24,8 +24,13 @@ exponential noise (complex Gaussian noise after square-law detection):
   ``Pfa = prod_{i<k} (N-i) / (N-i+alpha)`` (Rohling 1983), solved for alpha.
 
 Box sums come from one summed-area table, so CA/SO/GO cost does not depend on
-the window size. OS uses a compiled per-cell selection (numba; ``scipy.ndimage.rank_filter``
-with a ring footprint is ~5x slower on a 512 x 256 map).
+the window size. OS detection does not select ``X_(k)`` at every cell: it counts
+the training cells below the CUT's level (exact, see :func:`_os_detect_kernel`),
+about 15x cheaper than a per-cell selection. The full OS threshold and noise
+maps of :class:`CfarResult` are then computed only when first read (compiled
+per-cell selection; ``scipy.ndimage.rank_filter`` with a ring footprint is ~5x
+slower still), and :meth:`CfarResult.noise_power_at` selects only at the cells
+asked for (what :func:`detect` uses for the SNR of each detection).
 
 Edges (``edge=``): the Doppler axis is circular (the DFT is), so it always wraps
 except as stated:
@@ -96,7 +101,6 @@ class CfarWindow:
         return np.stack([dr[ring], dd[ring]], axis=1)
 
 
-@dataclass
 class CfarResult:
     """Output of :func:`cfar_2d`; all arrays ``[..., R, D]`` like the input map.
 
@@ -105,11 +109,13 @@ class CfarResult:
     mask : numpy.ndarray
         bool, ``power > threshold``.
     threshold : numpy.ndarray
-        float64 detection threshold, power units.
+        float64 detection threshold, power units. For OS it is computed on first
+        access (a selection per cell, ~10x the cost of the detection itself).
     noise_power : numpy.ndarray
         float64 estimate of the mean noise power per cell: the training mean
         (CA), the selected half mean (SO/GO), or the ordered statistic divided by
-        its expectation factor ``sum_{i<k} 1/(N-i)`` (OS).
+        its expectation factor ``sum_{i<k} 1/(N-i)`` (OS). Computed on first
+        access for OS, like ``threshold``; see :meth:`noise_power_at` for a few cells.
     alpha : float
         Threshold factor on the CFAR statistic (mean or ordered value).
     n_train : int
@@ -117,19 +123,57 @@ class CfarResult:
     method : str
     """
 
-    mask: np.ndarray
-    threshold: np.ndarray
-    noise_power: np.ndarray
-    alpha: float
-    n_train: int
-    method: str
+    def __init__(
+        self,
+        mask: np.ndarray,
+        threshold: np.ndarray | None,
+        noise_power: np.ndarray | None,
+        alpha: float,
+        n_train: int,
+        method: str,
+        *,
+        lazy_statistic: _LazyOrderedStatistic | None = None,
+    ) -> None:
+        if (threshold is None or noise_power is None) and lazy_statistic is None:
+            raise ValueError("pass threshold and noise_power maps (or a lazy statistic)")
+        for name, value in (("threshold", threshold), ("noise_power", noise_power)):
+            if value is not None and np.shape(value) != np.shape(mask):
+                raise ValueError(f"mask {np.shape(mask)} and {name} {np.shape(value)} must have one shape")
+        self.mask = mask
+        self.alpha = alpha
+        self.n_train = n_train
+        self.method = method
+        self._threshold = threshold
+        self._noise_power = noise_power
+        self._lazy = lazy_statistic
 
-    def __post_init__(self) -> None:
-        if self.mask.shape != self.threshold.shape or self.mask.shape != self.noise_power.shape:
-            raise ValueError(
-                f"mask {self.mask.shape}, threshold {self.threshold.shape} and noise_power "
-                f"{self.noise_power.shape} must have one shape"
-            )
+    @property
+    def threshold(self) -> np.ndarray:
+        if self._threshold is None:
+            self._threshold = self._lazy.threshold(self.alpha)
+        return self._threshold
+
+    @property
+    def noise_power(self) -> np.ndarray:
+        if self._noise_power is None:
+            self._noise_power = self._lazy.noise_power()
+        return self._noise_power
+
+    def noise_power_at(self, *index: np.ndarray) -> np.ndarray:
+        """``noise_power[index]`` for integer index arrays (e.g. ``numpy.nonzero(mask)``).
+
+        For OS without the full map computed, selects the ordered statistic at
+        these cells only.
+        """
+        if self._noise_power is None:
+            return self._lazy.noise_power_at(index)
+        return self._noise_power[index]
+
+    def __repr__(self) -> str:
+        return (
+            f"CfarResult(method={self.method!r}, shape={self.mask.shape}, detections={int(self.mask.sum())}, "
+            f"alpha={self.alpha:.6g}, n_train={self.n_train})"
+        )
 
 
 # --- threshold factors from Pfa -------------------------------------------------
@@ -326,30 +370,145 @@ def _kth_smallest(a: np.ndarray, b: np.ndarray, n: int, k: int) -> float:
         pivot = _median3(a, n)
 
 
-@numba.njit(cache=True)  # serial: on busy shared cores numba's thread pool ran up to 10x slower
+@numba.njit(cache=True, nogil=True)
+def _os_detect_kernel(
+    padded: np.ndarray, alpha: float, gr: int, gd: int, hr: int, hd: int, k: int, mask: np.ndarray
+) -> None:
+    """OS-CFAR decision ``x_cut > alpha * X_(k)`` for every cell, without selecting ``X_(k)``.
+
+    Exactness, in floating point: let ``y_i = fl(alpha * x_i)`` and the threshold
+    ``t = fl(alpha * X_(k))`` (float64 products, as :attr:`CfarResult.threshold`
+    computes them). Rounding is monotone and ``alpha > 0``, so ``x_i <= x_j``
+    implies ``y_i <= y_j``: the order of the ``x`` is an order of the ``y`` and
+    ``t = Y_(k)``, the k-th smallest ``y``. Then ``x_cut > Y_(k)`` iff
+    ``#{i : y_i < x_cut} >= k``: if ``Y_(k) < x_cut``, so are
+    ``Y_(1) <= ... <= Y_(k)``; if ``k`` of the ``y_i`` are below ``x_cut``, the
+    k-th smallest is at most the largest of them. Tied values need no special
+    case: each is counted by the same strict comparison as the definition's
+    strict ``>``. (NaN compares false, so it counts as ``+inf`` would.)
+
+    The count runs, for one CUT row at a time, over whole ring rows with the CUT
+    index innermost: contiguous compare-and-add that LLVM vectorises (N compares
+    per cell instead of a selection's several partition passes). No ``fastmath``:
+    it would let LLVM assume no inf/NaN and reassociate ``alpha * x``, and the
+    integer count vectorises without it.
+
+    Serial on purpose: with 2 threads (``parallel=True``) this kernel took 2x
+    longer than serial on the 2 shared cores it was measured on (other work
+    running), and it already takes ~10 ms on a 512 x 256 map; on an idle machine
+    2 threads could save at most those ~5 ms.
+    """
+    n_maps, n_r, n_d = mask.shape
+    width = 2 * hd + 1
+    td = hd - gd
+    counts = np.empty(n_d, dtype=np.int64)
+    for m in range(n_maps):
+        for r in range(n_r):
+            counts[:] = 0
+            cut = padded[m, r + hr, hd : hd + n_d]
+            for dr in range(-hr, hr + 1):
+                line = padded[m, r + hr + dr]
+                for j in range(width):
+                    if abs(dr) <= gr and td <= j < width - td:
+                        continue  # guard box
+                    for d in range(n_d):
+                        counts[d] += alpha * line[d + j] < cut[d]
+            for d in range(n_d):
+                mask[m, r, d] = counts[d] >= k
+
+
+@numba.njit(cache=True, nogil=True)
 def _os_kernel(padded: np.ndarray, offsets: np.ndarray, half_r: int, half_d: int, k: int, out: np.ndarray) -> None:
+    """The k-th smallest (0-based) training cell of every cell (full statistic map)."""
     n_maps, n_r, n_d = out.shape
     n = offsets.shape[0]
-    for row in numba.prange(n_maps * n_r):
-        m = row // n_r
-        r = row % n_r
-        a = np.empty(n, dtype=np.float64)
-        b = np.empty(n, dtype=np.float64)
-        for d in range(n_d):
-            for t in range(n):
-                a[t] = padded[m, r + half_r + offsets[t, 0], d + half_d + offsets[t, 1]]
-            out[m, r, d] = _kth_smallest(a, b, n, k)
+    a = np.empty(n, dtype=np.float64)
+    b = np.empty(n, dtype=np.float64)
+    for m in range(n_maps):
+        for r in range(n_r):
+            for d in range(n_d):
+                for t in range(n):
+                    a[t] = padded[m, r + half_r + offsets[t, 0], d + half_d + offsets[t, 1]]
+                out[m, r, d] = _kth_smallest(a, b, n, k)
 
 
-def _ordered_statistic(power: np.ndarray, window: CfarWindow, range_mode: str, rank: int) -> np.ndarray:
+@numba.njit(cache=True, nogil=True)
+def _os_at_kernel(
+    padded: np.ndarray, offsets: np.ndarray, half_r: int, half_d: int, k: int, cells: np.ndarray, out: np.ndarray
+) -> None:
+    """The k-th smallest training cell at ``cells`` (``[C, 3]`` map, range, Doppler indices)."""
+    n = offsets.shape[0]
+    a = np.empty(n, dtype=np.float64)
+    b = np.empty(n, dtype=np.float64)
+    for c in range(cells.shape[0]):
+        m, r, d = cells[c, 0], cells[c, 1], cells[c, 2]
+        for t in range(n):
+            a[t] = padded[m, r + half_r + offsets[t, 0], d + half_d + offsets[t, 1]]
+        out[c] = _kth_smallest(a, b, n, k)
+
+
+def _padded_maps(power: np.ndarray, window: CfarWindow, range_mode: str) -> np.ndarray:
+    """``[M, R + 2hr, D + 2hd]`` float64 maps with the edge handling applied."""
     n_r, n_d = power.shape[-2:]
     rows = _pad_indices(n_r, window.half_range, range_mode)
     cols = _pad_indices(n_d, window.half_doppler, "wrap")
     maps = power.reshape(-1, n_r, n_d)
-    padded = np.ascontiguousarray(np.take(np.take(maps, rows, axis=-2), cols, axis=-1), dtype=np.float64)
-    out = np.empty(maps.shape, dtype=np.float64)
-    _os_kernel(padded, window.offsets().astype(np.int64), window.half_range, window.half_doppler, rank - 1, out)
-    return out.reshape(power.shape)
+    return np.ascontiguousarray(np.take(np.take(maps, rows, axis=-2), cols, axis=-1), dtype=np.float64)
+
+
+class _LazyOrderedStatistic:
+    """OS statistic maps computed on demand, in full or at a few cells.
+
+    ``blank_rows`` range rows at each end are untested (``edge="valid-range"``):
+    threshold +inf, noise NaN there.
+    """
+
+    def __init__(self, padded: np.ndarray, window: CfarWindow, rank: int, shape: tuple[int, ...], blank_rows: int) -> None:
+        self.padded = padded
+        self.window = window
+        self.rank = rank
+        self.shape = shape
+        self.blank_rows = blank_rows
+        self.scale = float(np.sum(1.0 / (window.n_train - np.arange(rank))))
+        self._statistic: np.ndarray | None = None
+
+    def statistic(self) -> np.ndarray:
+        if self._statistic is None:
+            n_r, n_d = self.shape[-2:]
+            out = np.empty((self.padded.shape[0], n_r, n_d), dtype=np.float64)
+            offsets = self.window.offsets().astype(np.int64)
+            _os_kernel(self.padded, offsets, self.window.half_range, self.window.half_doppler, self.rank - 1, out)
+            self._statistic = out.reshape(self.shape)
+        return self._statistic
+
+    def _blank(self, values: np.ndarray, fill: float) -> np.ndarray:
+        if self.blank_rows:
+            n_r = self.shape[-2]
+            values[..., : self.blank_rows, :] = fill
+            values[..., n_r - self.blank_rows :, :] = fill
+        return values
+
+    def threshold(self, alpha: float) -> np.ndarray:
+        return self._blank(alpha * self.statistic(), np.inf)
+
+    def noise_power(self) -> np.ndarray:
+        return self._blank(self.statistic() / self.scale, np.nan)
+
+    def noise_power_at(self, index: tuple[np.ndarray, ...]) -> np.ndarray:
+        n_r, n_d = self.shape[-2:]
+        if len(index) != len(self.shape):
+            raise ValueError(f"noise_power_at needs {len(self.shape)} index arrays, got {len(index)}")
+        flat = np.ravel_multi_index(np.broadcast_arrays(*index), self.shape)
+        m, cell = np.divmod(flat.ravel(), n_r * n_d)
+        r, d = np.divmod(cell, n_d)
+        out = np.empty(flat.size, dtype=np.float64)
+        offsets = self.window.offsets().astype(np.int64)
+        cells = np.ascontiguousarray(np.stack([m, r, d], axis=1), dtype=np.int64)
+        _os_at_kernel(self.padded, offsets, self.window.half_range, self.window.half_doppler, self.rank - 1, cells, out)
+        out /= self.scale
+        if self.blank_rows:
+            out[(r < self.blank_rows) | (r >= n_r - self.blank_rows)] = np.nan
+        return out.reshape(flat.shape)
 
 
 def ordered_statistic_reference(power: np.ndarray, window: CfarWindow, rank: int, range_mode: str = "reflect") -> np.ndarray:
@@ -432,31 +591,38 @@ def cfar_2d(
     range_mode = "wrap" if edge == "wrap" else "reflect"
     alpha = cfar_alpha(method, n, float(pfa), os_rank)
 
+    blank_rows = window.half_range if edge == "valid-range" else 0
     if method == "os":
-        stat = _ordered_statistic(power, window, range_mode, rank)
-        noise = stat / float(np.sum(1.0 / (n - np.arange(rank))))
-        threshold = alpha * stat
-    else:
-        table = _summed_area(power, window, range_mode)
-        maps = power.reshape(-1, n_r, n_d)
-        stat = np.empty(maps.shape, dtype=np.float64)
-        threshold = np.empty(maps.shape, dtype=np.float64)
-        _box_cfar_kernel(
-            table,
-            maps,
-            gr,
-            gd,
-            window.half_range,
-            window.half_doppler,
-            METHODS.index(method),
-            alpha,
-            stat,
-            threshold,
-        )
-        noise = stat.reshape(power.shape)
-        threshold = threshold.reshape(power.shape)
-    if edge == "valid-range":
-        for rows in (slice(0, window.half_range), slice(n_r - window.half_range, n_r)):
+        padded = _padded_maps(power, window, range_mode)
+        mask = np.empty(padded.shape[:1] + power.shape[-2:], dtype=bool)
+        _os_detect_kernel(padded, alpha, gr, gd, window.half_range, window.half_doppler, rank, mask)
+        mask = mask.reshape(power.shape)
+        if blank_rows:
+            mask[..., :blank_rows, :] = False
+            mask[..., n_r - blank_rows :, :] = False
+        lazy = _LazyOrderedStatistic(padded, window, rank, power.shape, blank_rows)
+        return CfarResult(mask, None, None, alpha, n, method, lazy_statistic=lazy)
+
+    table = _summed_area(power, window, range_mode)
+    maps = power.reshape(-1, n_r, n_d)
+    stat = np.empty(maps.shape, dtype=np.float64)
+    threshold = np.empty(maps.shape, dtype=np.float64)
+    _box_cfar_kernel(
+        table,
+        maps,
+        gr,
+        gd,
+        window.half_range,
+        window.half_doppler,
+        METHODS.index(method),
+        alpha,
+        stat,
+        threshold,
+    )
+    noise = stat.reshape(power.shape)
+    threshold = threshold.reshape(power.shape)
+    if blank_rows:
+        for rows in (slice(0, blank_rows), slice(n_r - blank_rows, n_r)):
             threshold[..., rows, :] = np.inf
             noise[..., rows, :] = np.nan
     mask = power > threshold
@@ -566,7 +732,7 @@ def detect(
     r_idx, d_idx = np.nonzero(mask)
     cell_power = power[r_idx, d_idx]
     with np.errstate(divide="ignore"):
-        snr_db = 10.0 * np.log10(cell_power / result.noise_power[r_idx, d_idx])
+        snr_db = 10.0 * np.log10(cell_power / result.noise_power_at(r_idx, d_idx))
     return CfarDetections(
         range_bin=r_idx.astype(np.int64),
         doppler_bin=d_idx.astype(np.int64),
