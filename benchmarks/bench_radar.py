@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from zendar_dataset.radar.cfar import CfarWindow, cfar_2d, default_os_rank, ordered_statistic_reference
+from zendar_dataset.radar.cfar import CfarWindow, cfar_2d, default_os_rank, detect, ordered_statistic_reference
 from zendar_dataset.radar.doa import estimate_azimuth, steering_vectors
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import range_doppler
@@ -99,7 +99,7 @@ def cpu_rows(repeat: int) -> list[tuple[str, float, float, float, str]]:
     power = rng.exponential(size=(512, 256))
     row_ref = timeit(lambda: reference_cfar_rows(power), max(3, repeat // 3))[0]
     for method in ("ca", "so", "go", "os"):
-        ours = timeit(lambda: cfar_2d(power, method=method, guard=GUARD, train=TRAIN, pfa=1e-4), repeat if method != "os" else max(3, repeat // 3))
+        ours = timeit(lambda: cfar_2d(power, method=method, guard=GUARD, train=TRAIN, pfa=1e-4), repeat)
         loop = reference_cfar_per_cell(power, method) * 1e3
         rows.append((f"{method.upper()}-CFAR 512x256, {CfarWindow(*GUARD, *TRAIN).n_train} training cells", *ours, loop, "per-cell loop (extrapolated)"))
         if method == "ca":
@@ -107,7 +107,12 @@ def cpu_rows(repeat: int) -> list[tuple[str, float, float, float, str]]:
         if method == "os":
             window = CfarWindow(*GUARD, *TRAIN)
             rank_ref = timeit(lambda: ordered_statistic_reference(power, window, default_os_rank(window.n_train)), 2)[0]
-            rows.append(("OS-CFAR 512x256", *ours, rank_ref, "scipy.ndimage.rank_filter ring"))
+            rows.append(("OS-CFAR 512x256 (detection mask)", *ours, rank_ref, "scipy.ndimage.rank_filter ring"))
+            full = timeit(lambda: cfar_2d(power, method="os", guard=GUARD, train=TRAIN, pfa=1e-4).threshold, 3)
+            rows.append(("OS-CFAR 512x256 with the full threshold map", *full, rank_ref, "scipy.ndimage.rank_filter ring"))
+            rows.append(("OS-CFAR 512x256 (detection mask)", *ours, full[0], "per-cell selection (threshold map)"))
+            ours = timeit(lambda: detect(power, range_bin_m=0.2, doppler_bin_mps=0.1, method="os", guard=GUARD, train=TRAIN), repeat)
+            rows.append(("OS detect() 512x256 (mask + local max + SNR)", *ours, full[0], "per-cell selection (threshold map)"))
 
     wavelength = SPEED_OF_LIGHT_MPS / 77e9
     rx = np.c_[np.zeros(4), np.arange(4) * wavelength / 2, np.zeros(4)]

@@ -393,10 +393,12 @@ def _os_detect_kernel(
     it would let LLVM assume no inf/NaN and reassociate ``alpha * x``, and the
     integer count vectorises without it.
 
-    Serial on purpose: with 2 threads (``parallel=True``) this kernel took 2x
-    longer than serial on the 2 shared cores it was measured on (other work
-    running), and it already takes ~10 ms on a 512 x 256 map; on an idle machine
-    2 threads could save at most those ~5 ms.
+    Serial on purpose, by measurement (512 x 256 map, 248 training cells, 2-core
+    machine): best of 60 runs 5.9 ms serial against 2.5 ms with ``parallel=True``
+    on 2 threads (the idle case), medians 17-19 ms for both with other work
+    running. Two threads save ~3 ms of a 100 ms budget, but numba's pool is GNU
+    OpenMP here, which is not fork-safe, and maps are usually processed in forked
+    data-loader workers, where extra threads per worker also oversubscribe cores.
     """
     n_maps, n_r, n_d = mask.shape
     width = 2 * hd + 1
