@@ -65,7 +65,7 @@ def _cis_neg_turns(turns):
 @numba.njit(parallel=True, fastmath=True, error_model="numpy", cache=True)
 def _kernel(
     profiles,
-    positions,
+    positions_xyz,
     origin,
     di,
     dj,
@@ -78,7 +78,7 @@ def _kernel(
     out_re,
     out_im,
 ):
-    num_pulses, num_samples = profiles.shape
+    num_pulses, num_samples = profiles.shape  # positions_xyz is [3, P]
     num_segments = (width + seg_px - 1) // seg_px
     dj_norm2 = np.float32(dj[0] * dj[0] + dj[1] * dj[1] + dj[2] * dj[2])
     inv_bin32 = np.float32(inv_bin)
@@ -110,23 +110,37 @@ def _kernel(
         pairs_hi = np.empty(seg_px, dtype=np.uint64)
         lo = pairs_lo.view(np.float32)
         hi = pairs_hi.view(np.float32)
+        # float64 per (segment, pulse), SIMD over pulses: see zendar_dataset.sar.segments.
+        b_all = np.empty(num_pulses, dtype=np.float32)
+        r_ref_all = np.empty(num_pulses, dtype=np.float32)
+        ref_turns_all = np.empty(num_pulses, dtype=np.float32)
+        half_step_all = np.empty(num_pulses, dtype=np.float32)
+        base_index_all = np.empty(num_pulses, dtype=np.float32)
+        b_over_2r_all = np.empty(num_pulses, dtype=np.float32)
         for p in range(num_pulses):
-            # float64 per (segment, pulse): see zendar_dataset.sar.segments.
-            dx = positions[p, 0] - cx
-            dy = positions[p, 1] - cy
-            dz = positions[p, 2] - cz
-            r_ref64 = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx = positions_xyz[0, p] - cx
+            dy = positions_xyz[1, p] - cy
+            dz = positions_xyz[2, p] - cz
+            r_ref64 = np.sqrt(dx * dx + dy * dy + dz * dz)
             b64 = 2.0 * (dj[0] * dx + dj[1] * dy + dj[2] * dz)
-            b = np.float32(b64)
+            inv_r64 = 1.0 / (r_ref64 + 1e-300)
             ref_turns64 = r_ref64 * cycles_per_m
-            ref_turns = np.float32(ref_turns64 - math.floor(ref_turns64))
             # Linear phase term, turns per half pixel, reduced to [-0.5, 0.5).
-            half_step_turns64 = -0.25 * b64 / (r_ref64 + 1e-300) * cycles_per_m
-            half_step_turns = np.float32(half_step_turns64 - math.floor(half_step_turns64 + 0.5))
-            base_index = np.float32((r_ref64 - range_offset_m) * inv_bin)
-            r_ref = np.float32(r_ref64)
+            half_step64 = -0.25 * cycles_per_m * b64 * inv_r64
+            b_all[p] = b64
+            r_ref_all[p] = r_ref64
+            ref_turns_all[p] = ref_turns64 - np.floor(ref_turns64)
+            half_step_all[p] = half_step64 - np.floor(half_step64 + 0.5)
+            base_index_all[p] = (r_ref64 - range_offset_m) * inv_bin
+            b_over_2r_all[p] = 0.5 * b64 * inv_r64
+        for p in range(num_pulses):
+            b = b_all[p]
+            r_ref = r_ref_all[p]
             r_ref2 = r_ref * r_ref
-            b_over_2r = np.float32(0.5 * b64 / (r_ref64 + 1e-300))
+            ref_turns = ref_turns_all[p]
+            half_step_turns = half_step_all[p]
+            base_index = base_index_all[p]
+            b_over_2r = b_over_2r_all[p]
             # Geometry, interpolation weights and phase rotation: SIMD.
             for q in range(seg_px):
                 m = offsets[q]
@@ -184,7 +198,7 @@ def backproject_numba(
     out_im = np.empty((height, width), dtype=np.float32)
     _kernel(
         np.ascontiguousarray(profiles, dtype=np.complex64).view(np.uint64),
-        np.ascontiguousarray(positions, dtype=np.float64),
+        np.ascontiguousarray(positions.T, dtype=np.float64),
         grid.origin,
         grid.di,
         grid.dj,
