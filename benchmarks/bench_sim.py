@@ -1,0 +1,103 @@
+"""Simulator costs: cube synthesis (fast vs exact), SAR image, lidar sweep, whole tiny/demo datasets.
+
+Run: python benchmarks/bench_sim.py [--skip-demo]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import shutil
+import tempfile
+import time
+
+import numpy as np
+
+from zendar_dataset.geometry.poses import PoseInterpolator
+from zendar_dataset.radar.fmcw import beat_signal_exact
+from zendar_dataset.radar.range_doppler import range_doppler
+from zendar_dataset.sim import ego as ego_model
+from zendar_dataset.sim.generate import synthesize_dataset
+from zendar_dataset.sim.lidar import lidar_sweep
+from zendar_dataset.sim.profiles import get_profile
+from zendar_dataset.sim.radar_model import synthesize_cube
+from zendar_dataset.sim.scene import build_scene, simulate_sar, stream_rng
+
+
+def _best(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - start)
+    return min(times), result
+
+
+def bench_cube() -> None:
+    params = ego_model.radar_params(get_profile("paper"))
+    rng = np.random.default_rng(0)
+    r = rng.uniform(5.0, 80.0, 20)
+    az = rng.uniform(-1.0, 1.0, 20)
+    pos = np.stack([r * np.cos(az), r * np.sin(az), rng.uniform(-0.3, 0.3, 20)], axis=1)
+    vel = np.concatenate([rng.uniform(-12, 12, (20, 2)), np.zeros((20, 1))], axis=1)
+    amp = rng.normal(size=20) + 1j * rng.normal(size=20)
+    t = np.arange(params.n_chirps) * params.chirp_interval_s
+    per_chirp = pos[:, None] + vel[:, None] * t[None, :, None]
+    exact_s, exact = _best(lambda: range_doppler(beat_signal_exact(params, pos, vel, amp)), 2)
+    print("cube synthesis, 512 x 256 x 4, 20 moving targets")
+    print(f"{'half-width (bins)':>18} {'fast ms':>9} {'exact ms':>9} {'speed-up':>9} {'rel. L2 err':>12}")
+    for half_width in (4, 6, 8):
+        fast_s, fast = _best(lambda: synthesize_cube(params, per_chirp, amp, half_width_bins=half_width), 7)
+        error = np.linalg.norm(fast - exact) / np.linalg.norm(exact)
+        print(f"{half_width:>18} {fast_s * 1e3:9.1f} {exact_s * 1e3:9.1f} {exact_s / fast_s:9.1f} {error:12.2e}")
+
+
+def bench_scene_parts() -> None:
+    print("\nper-frame costs in a simulated scene")
+    print(f"{'profile':>8} {'SAR image ms':>13} {'lidar sweep ms':>15} {'scatterers':>11}")
+    for name in ("tiny", "demo"):
+        profile = get_profile(name)
+        truth = build_scene(profile, 0, 0)
+        written = truth.tracklog_written
+        tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
+        rng = stream_rng(0, 0, "sar_front_left")
+        sar_s, _ = _best(lambda: simulate_sar(truth, profile, "front_left", 0.55, rng, tracklog), 3)
+        rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(0.55))
+        boxes = truth.world.boxes_at(0.55)
+        lidar_s, _ = _best(lambda: lidar_sweep(rng, rotation, position, boxes, profile.lidar_azimuth_step_deg), 3)
+        print(f"{name:>8} {sar_s * 1e3:13.1f} {lidar_s * 1e3:15.1f} {truth.world.static_scatterers.rcs_m2.size:11d}")
+    paper = get_profile("paper")
+    beams = 16 * int(360 / paper.lidar_azimuth_step_deg)
+    truth = build_scene(get_profile("demo"), 0, 0)
+    rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(0.55))
+    rng = np.random.default_rng(0)
+    lidar_s, _ = _best(lambda: lidar_sweep(rng, rotation, position, truth.world.boxes_at(0.55), paper.lidar_azimuth_step_deg), 3)
+    print(f"paper-resolution VLP-16 sweep ({beams} firings): {lidar_s * 1e3:.1f} ms")
+
+
+def bench_dataset(name: str) -> None:
+    profile = get_profile(name)
+    out = pathlib.Path(tempfile.mkdtemp()) / name
+    start = time.perf_counter()
+    synthesize_dataset(out, name, progress=False)
+    seconds = time.perf_counter() - start
+    size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    print(f"{name:>8} {profile.default_scenes:7d} {seconds:10.1f} {size / 2**20:10.1f}")
+    shutil.rmtree(out.parent)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--skip-demo", action="store_true", help="skip the demo dataset (minutes)")
+    args = parser.parse_args()
+    bench_cube()
+    bench_scene_parts()
+    print("\nwhole default datasets")
+    print(f"{'profile':>8} {'scenes':>7} {'seconds':>10} {'MiB':>10}")
+    bench_dataset("tiny")
+    if not args.skip_demo:
+        bench_dataset("demo")
+
+
+if __name__ == "__main__":
+    main()
