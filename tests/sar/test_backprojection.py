@@ -157,7 +157,9 @@ def test_backends_match_float64_reference_and_each_other(busy_scene):
 
 @pytest.mark.gpu
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-def test_cuda_matches_cpu(busy_scene):
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+@pytest.mark.parametrize("torch_compile", [False, True])
+def test_cuda_matches_cpu(busy_scene, torch_compile):
     positions, profiles, grid = busy_scene
     cpu = run(profiles, positions, grid, "numba")
     cuda = backproject(
@@ -167,6 +169,7 @@ def test_cuda_matches_cpu(busy_scene):
         range_bin_m=RANGE_BIN_M,
         center_frequency_hz=CENTER_FREQUENCY_HZ,
         range_offset_m=RANGE_OFFSET_M,
+        torch_compile=torch_compile,
     )
     assert cuda.device.type == "cuda"
     assert _relative_error(cuda, cpu.astype(np.complex128)) < 1e-4
@@ -244,3 +247,29 @@ def test_bad_inputs_are_all_reported():
     with pytest.raises(ValueError, match="backend"):
         backproject(np.zeros((4, 10), np.complex64), np.zeros((4, 3)), grid, range_bin_m=1.0,
                     center_frequency_hz=1.0, backend="fortran")
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_torch_compile_matches_reference(busy_scene):
+    """The fused (torch.compile) path, which GPUs use for speed, computes the same sum."""
+    positions, profiles, grid = busy_scene
+    reference = reference_backprojection(
+        profiles,
+        positions,
+        grid.pixel_centers(),
+        range_offset_m=RANGE_OFFSET_M,
+        range_bin_m=RANGE_BIN_M,
+        center_frequency_hz=CENTER_FREQUENCY_HZ,
+    )
+    image = backproject(
+        profiles,
+        positions,
+        grid,
+        range_bin_m=RANGE_BIN_M,
+        center_frequency_hz=CENTER_FREQUENCY_HZ,
+        range_offset_m=RANGE_OFFSET_M,
+        backend="torch",
+        torch_compile=True,
+    )
+    assert _relative_error(image, reference) < 1e-4

@@ -9,6 +9,7 @@ even for grids and antenna positions in ECEF.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -37,6 +38,7 @@ def backproject(
     range_offset_m: float = 0.0,
     backend: str = "auto",
     device: str | torch.device | None = None,
+    torch_compile: bool = False,
 ) -> np.ndarray | torch.Tensor:
     """Form a complex SAR image by time-domain backprojection.
 
@@ -68,6 +70,10 @@ def backproject(
     device : str or torch.device, optional
         Torch device (e.g. ``"cuda"``); default: the device of ``range_profiles``
         when it is a tensor, else the CPU.
+    torch_compile : bool
+        Torch backend: fuse the per-pixel work with ``torch.compile`` (one kernel
+        instead of ~40 passes over memory; what a GPU needs to be fast). The first
+        call compiles (tens of seconds; cached on disk by torch afterwards).
 
     Returns
     -------
@@ -118,7 +124,7 @@ def backproject(
     device = torch.device(device)
     profiles_t = torch.as_tensor(range_profiles, device=device).to(torch.complex64)
     image = _backproject_torch(
-        profiles_t, positions, grid, range_bin_m, range_offset_m, cycles_per_m
+        profiles_t, positions, grid, range_bin_m, range_offset_m, cycles_per_m, torch_compile
     )
     return image if is_tensor else image.cpu().numpy()
 
@@ -164,6 +170,7 @@ def _backproject_torch(
     range_bin_m: float,
     range_offset_m: float,
     cycles_per_m: float,
+    torch_compile: bool = False,
 ) -> torch.Tensor:
     """Torch backend; see :func:`backproject`. Returns a complex64 tensor [H, W]."""
     device = profiles.device
@@ -179,9 +186,10 @@ def _backproject_torch(
     positions_t = torch.tensor(positions, device=device)
     dj_t = torch.tensor(grid.dj, device=device)
     offsets_px = torch.arange(seg_px, device=device, dtype=torch.float32) - (seg_px - 1) / 2
-    odd_px = 2 * offsets_px  # odd integers: 2·m
-    dj_norm2 = float(grid.dj @ grid.dj)
     inv_bin = 1.0 / range_bin_m
+    # Scalars as a tensor, so a compiled pixel_sums is not specialised on their values.
+    constants = torch.tensor([float(grid.dj @ grid.dj), inv_bin, cycles_per_m], device=device)
+    pixel_sums = _compiled_pixel_sums() if torch_compile else _pixel_sums
     # Flattened (re, im) samples; pulse p's sample r is row p·R + r.
     samples_ri = torch.view_as_real(profiles.contiguous()).reshape(-1, 2)
     pulse_rows = torch.arange(num_pulses, device=device) * num_samples
@@ -208,28 +216,73 @@ def _backproject_torch(
             half_step = (half_step - torch.round(half_step)).float()[..., None]
             b_over_2r = (0.5 * b / (r_ref + 1e-300)).float()[..., None]
             base_index = ((r_ref - range_offset_m) * inv_bin).float()[..., None]
-            b = b.float()[..., None]
-            r_ref = r_ref.float()[..., None]
-            # Per pixel, float32: [t, p, seg_px].
-            s = offsets_px * (offsets_px * dj_norm2 - b)
-            inv_sum = 1.0 / (torch.sqrt(r_ref * r_ref + s) + r_ref + 1e-30)
-            delta_r = s * inv_sum
-            index = base_index + delta_r * inv_bin
-            valid = (index >= 0) & (index <= num_samples - 1)
-            index = index.clamp(0, num_samples - 1)
-            lower = torch.floor(index).clamp(max=num_samples - 2)
-            weight = (index - lower)[..., None]
-            rows = lower.long() + pulse_rows[pulses, None]
-            lo = samples_ri[rows]
-            value = (lo + weight * (samples_ri[rows + 1] - lo)) * valid[..., None]
-            # R − R_ref minus its linear part m·g (g = −b / 2R_ref) is small and
-            # accurate in float32; the linear part's phase comes reduced.
-            curved_r = (offsets_px * offsets_px * dj_norm2 + offsets_px * b_over_2r * delta_r) * inv_sum
-            cycles = ref_cycles + odd_px * half_step + curved_r * cycles_per_m
-            angle = (2 * math.pi) * (cycles - torch.round(cycles))
-            cos, sin = torch.cos(angle), torch.sin(angle)
-            # value · exp(−j·angle)
-            acc[..., 0] += (value[..., 0] * cos + value[..., 1] * sin).sum(dim=1)
-            acc[..., 1] += (value[..., 1] * cos - value[..., 0] * sin).sum(dim=1)
+            sums = pixel_sums(
+                b.float()[..., None],
+                r_ref.float()[..., None],
+                ref_cycles,
+                half_step,
+                b_over_2r,
+                base_index,
+                offsets_px,
+                constants,
+                samples_ri,
+                pulse_rows[pulses, None],
+                num_samples,
+            )
+            acc += sums
         image[tiles] = torch.view_as_complex(acc)
     return image.reshape(height, num_segments * seg_px)[:, :width].contiguous()
+
+
+def _pixel_sums(
+    b: torch.Tensor,
+    r_ref: torch.Tensor,
+    ref_cycles: torch.Tensor,
+    half_step: torch.Tensor,
+    b_over_2r: torch.Tensor,
+    base_index: torch.Tensor,
+    offsets_px: torch.Tensor,
+    constants: torch.Tensor,
+    samples_ri: torch.Tensor,
+    pulse_rows: torch.Tensor,
+    num_samples: int,
+) -> torch.Tensor:
+    """Per-pixel float32 work of one chunk, summed over its pulses: [t, seg_px, 2].
+
+    The per-(segment, pulse) inputs are [t, p, 1] (``pulse_rows`` [p, 1]): see
+    :mod:`zendar_dataset.sar.segments` for what they are.
+    """
+    dj_norm2, inv_bin, cycles_per_m = constants[0], constants[1], constants[2]
+    m = offsets_px
+    s = m * (m * dj_norm2 - b)
+    inv_sum = 1.0 / (torch.sqrt(r_ref * r_ref + s) + r_ref + 1e-30)
+    delta_r = s * inv_sum
+    index = base_index + delta_r * inv_bin
+    valid = (index >= 0) & (index <= num_samples - 1)
+    index = index.clamp(0, num_samples - 1)
+    lower = torch.floor(index).clamp(max=num_samples - 2)
+    weight = (index - lower)[..., None]
+    rows = lower.long() + pulse_rows
+    lo = samples_ri[rows]
+    value = (lo + weight * (samples_ri[rows + 1] - lo)) * valid[..., None]
+    # R − R_ref minus its linear part m·g (g = −b / 2R_ref) is small and accurate
+    # in float32; the linear part's phase comes reduced (2m is an odd integer).
+    curved_r = (m * m * dj_norm2 + m * b_over_2r * delta_r) * inv_sum
+    cycles = ref_cycles + (2 * m) * half_step + curved_r * cycles_per_m
+    angle = (2 * math.pi) * (cycles - torch.round(cycles))
+    cos, sin = torch.cos(angle), torch.sin(angle)
+    # value · exp(−j·angle)
+    return torch.stack(
+        [
+            (value[..., 0] * cos + value[..., 1] * sin).sum(dim=1),
+            (value[..., 1] * cos - value[..., 0] * sin).sum(dim=1),
+        ],
+        dim=-1,
+    )
+
+
+@functools.cache
+def _compiled_pixel_sums():
+    # One fused kernel instead of ~40 elementwise passes over memory; shapes vary
+    # between chunks, hence dynamic.
+    return torch.compile(_pixel_sums, dynamic=True)
