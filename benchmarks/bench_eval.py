@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "eval"))
+sys.path.insert(0, str(ROOT))
 
-from eval_reference import reference_evaluate  # noqa: E402
+from tests.eval.eval_reference import reference_evaluate  # noqa: E402
 
 from zendar_dataset.eval import evaluate  # noqa: E402
 from zendar_dataset.eval.evaluate import score_tables  # noqa: E402

@@ -416,7 +416,7 @@ class ZendarDataset(Dataset):
             if out is None:
                 cube = cubes[start : element + 1]
             else:
-                _read_frames_into(cubes, start, element + 1, out)
+                cubes.read_into(start, element + 1, out)
                 cube = out
             return {"cube": cube, "timestamp_ns": times[start : element + 1].copy()}
         frame: dict[str, Any] = {"timestamp_ns": int(times[element])}
@@ -443,33 +443,6 @@ class ZendarDataset(Dataset):
         if not batch:
             raise ValueError("collate needs at least one item")
         return _collate(list(batch), path=())
-
-
-def _read_frames_into(array: StoredArray, start: int, stop: int, out: np.ndarray) -> None:
-    """Read frames ``start:stop`` of ``array`` into ``out`` without an intermediate copy
-    where the store allows it (a local raw chunk per frame), else through the reader."""
-    direct = getattr(array, "_direct", None)
-    locate = getattr(direct, "_locate", None)
-    frame_bytes = getattr(direct, "frame_bytes", None)
-    if locate is None or out.dtype != array.dtype or not out.flags.c_contiguous:
-        out[...] = array[start:stop]
-        return
-    flat = out.reshape(stop - start, -1).view(np.uint8)
-    for row, frame in enumerate(range(start, stop)):
-        try:
-            path, offset, size = locate(frame)
-            if size != frame_bytes:
-                raise ValueError(f"chunk of frame {frame} holds {size} bytes, expected {frame_bytes}")
-            with open(path, "rb", buffering=0) as handle:
-                handle.seek(offset)
-                got = handle.readinto(flat[row])
-            if got != frame_bytes:
-                raise ValueError(f"chunk of frame {frame} is truncated: read {got} of {frame_bytes} bytes")
-        except (OSError, ValueError) as exc:
-            raise ZendarFormatError(
-                f"{array.scene_id}: {array.path}: expected readable {array.dtype.name} chunks, "
-                f"found a truncated or corrupt chunk ({exc})"
-            ) from exc
 
 
 def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:

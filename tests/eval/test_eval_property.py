@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from eval_reference import reference_evaluate
+from tests.eval.eval_reference import reference_evaluate
 from zendar_dataset.eval import evaluate
 
 coordinate = st.one_of(

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from conftest import CAM_H, CAM_W, ENU_ORIGIN, T0_NS, A, D, R, make_calibration
-from helpers import corrupt_chunk, replace_array, set_attr
+from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, T0_NS, A, D, R, make_calibration
+from tests.format.helpers import corrupt_chunk, replace_array, set_attr
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import SceneReader, SceneWriter, open_dataset
 

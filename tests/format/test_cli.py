@@ -10,8 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import make_dataset, tree_digest
-from helpers import dump, replace_array, set_attr
+from tests.format.conftest import make_dataset, tree_digest
+from tests.format.helpers import dump, replace_array, set_attr
 from zendar_dataset.format import open_dataset
 from zendar_dataset.format.ground_truth import ground_truth_frames
 

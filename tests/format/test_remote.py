@@ -7,7 +7,7 @@ import socket
 import numpy as np
 import pytest
 
-from conftest import make_dataset
+from tests.format.conftest import make_dataset
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import open_dataset
 from zendar_dataset.format.ground_truth import ground_truth_frames

@@ -8,8 +8,8 @@ import pickle
 import numpy as np
 import pytest
 
-from conftest import CAM_H, CAM_W, ENU_ORIGIN, SAR_H, SAR_W, T0_NS, A, D, R, make_calibration
-from helpers import dump
+from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, SAR_H, SAR_W, T0_NS, A, D, R, make_calibration
+from tests.format.helpers import dump
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import Calibration, DatasetWriter, SceneReader, SceneWriter, open_dataset
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import ENU_ORIGIN, T0_NS, A, D, R, make_calibration, write_scene
+from tests.format.conftest import ENU_ORIGIN, T0_NS, A, D, R, make_calibration, write_scene
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import DatasetWriter, SceneWriter, open_dataset
 

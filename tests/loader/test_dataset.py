@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from conftest import (
+from tests.loader.conftest import (
     CAM_H,
     CAM_W,
     ECEF_R_IMU,
@@ -196,7 +196,7 @@ def test_construction_survives_deleted_cube_chunks(tmp_path):
     # Bulk chunks are never touched at construction: delete them all and build the index.
     import shutil
 
-    from conftest import make_dataset
+    from tests.loader.conftest import make_dataset
 
     root = make_dataset(tmp_path / "ds", "zarr")
     for scene in ("alpha", "beta"):
@@ -249,7 +249,7 @@ def test_batched_reads_match_items_and_collate_without_copy(dataset_root):
 
 
 def test_truncated_cube_chunk_raises_format_error(tmp_path):
-    from conftest import make_dataset
+    from tests.loader.conftest import make_dataset
 
     root = make_dataset(tmp_path / "ds", "zarr")
     chunk = root / "scenes" / "alpha.zarr" / "radar" / "left" / "cube" / "c" / "4" / "0" / "0" / "0"  # frame 2 (200 ms) reads cube 4 (190 ms)

@@ -4,7 +4,7 @@ import socket
 
 import numpy as np
 import pytest
-from conftest import make_dataset
+from tests.loader.conftest import make_dataset
 from torch.utils.data import DataLoader
 
 from zendar_dataset import ZendarDataset

@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 import torch.multiprocessing as mp
-from conftest import make_dataset
+from tests.loader.conftest import make_dataset
 
 from zendar_dataset.samplers import SceneDistributedSampler, assign_scenes
 
@@ -71,7 +71,7 @@ def test_sampler_rejects_bad_arguments():
 
 @pytest.mark.slow
 def test_two_gloo_processes_shard_whole_scenes(tmp_path):
-    import _workers
+    from tests.loader import _workers
 
     root = make_dataset(tmp_path / "ds", "zarr")
     mp.spawn(

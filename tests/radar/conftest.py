@@ -1,5 +1,5 @@
 import pytest
-from radar_helpers import ula_params
+from tests.radar.radar_helpers import ula_params
 
 from zendar_dataset.radar.fmcw import FmcwParams
 

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from radar_helpers import ula_params
+from tests.radar.radar_helpers import ula_params
 
 from zendar_dataset.radar.cfar import (
     METHODS,

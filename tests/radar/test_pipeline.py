@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 import torch
-from radar_helpers import ula_params
+from tests.radar.radar_helpers import ula_params
 
 from zendar_dataset.radar.cfar import METHODS, cfar_2d, detect
 from zendar_dataset.radar.doa import estimate_azimuth

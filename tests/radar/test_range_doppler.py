@@ -11,7 +11,7 @@ from zendar_dataset.radar.range_doppler import (
     window_values,
 )
 
-from radar_helpers import ula_params
+from tests.radar.radar_helpers import ula_params
 
 # 3-dB main-lobe width of the Hann window, in DFT bins (Harris 1978, Table 1).
 HANN_3DB_WIDTH_BINS = 1.44

@@ -210,10 +210,31 @@ class StoredArray:
         except IndexError:
             raise
         except stores.DECODE_ERRORS as exc:
-            raise ZendarFormatError(
-                f"{self.scene_id}: {self.path}: expected readable {self.dtype.name} chunks, "
-                f"found a truncated or corrupt chunk ({type(exc).__name__}: {exc})"
-            ) from exc
+            raise self._corrupt(exc) from exc
+
+    def read_into(self, start: int, stop: int, out: np.ndarray) -> None:
+        """Read frames ``start:stop`` into the preallocated ``out`` [stop - start, ...].
+
+        Local raw stores with one frame per chunk are read straight into ``out``
+        (no intermediate copy: the loader uses this to fill shared-memory batch
+        buffers); anything else goes through the backend and is copied.
+        """
+        direct_ok = (
+            self._direct is not None and out.dtype == self.dtype and out.flags.c_contiguous
+        )
+        try:
+            if direct_ok:
+                self._direct.read_into(start, stop, out)
+            else:
+                out[...] = self.raw[start:stop]
+        except stores.DECODE_ERRORS as exc:
+            raise self._corrupt(exc) from exc
+
+    def _corrupt(self, exc: BaseException) -> ZendarFormatError:
+        return ZendarFormatError(
+            f"{self.scene_id}: {self.path}: expected readable {self.dtype.name} chunks, "
+            f"found a truncated or corrupt chunk ({type(exc).__name__}: {exc})"
+        )
 
     def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
         data = self[...]

@@ -289,6 +289,11 @@ class DirectFrameReader:
     def read(self, start: int, stop: int) -> np.ndarray:
         """Frames ``start:stop`` as one array; raises ValueError for a missing or wrong-size chunk."""
         out = np.empty((stop - start, *self.frame_shape), dtype=self.dtype)
+        self.read_into(start, stop, out)
+        return out
+
+    def read_into(self, start: int, stop: int, out: np.ndarray) -> None:
+        """Read frames ``start:stop`` into ``out`` (C-contiguous, this reader's dtype and frame shape)."""
         flat = out.reshape(stop - start, -1).view(np.uint8)
         for row, frame in enumerate(range(start, stop)):
             path, offset, size = self._locate(frame)
@@ -299,7 +304,6 @@ class DirectFrameReader:
                 got = handle.readinto(flat[row])
             if got != self.frame_bytes:
                 raise ValueError(f"chunk of frame {frame} is truncated: read {got} of {self.frame_bytes} bytes")
-        return out
 
 
 def direct_frame_reader(array: Any) -> DirectFrameReader | None:
