@@ -32,6 +32,7 @@ GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
 PAD_S = 1.5
 CUBE_HALF_WIDTH_BINS = 4
 SAR_HALF_WIDTH_BINS = 4
+SAR_MARGIN_M = 5.0
 STREAMS = ("road", "ego", "world", "traffic", "tracklog", "front_left", "front_right", "sar_front_left",
            "sar_front_right", "lidar", "enu")
 
@@ -171,6 +172,10 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     mid = local[:, local.shape[1] // 2]
     r_mid = np.linalg.norm(mid, axis=-1)
     keep = _visible(mid, params.max_range_m - SAR_HALF_WIDTH_BINS * params.range_bin_m) & (r_mid > r_lo) & (r_mid < r_hi)
+    # Scatterers far outside the imaged square add only cross-range sidelobes to it.
+    mid_ego = mid @ mount.rotation.T + mount.translation
+    half_extent = 0.5 * np.array(profile.sar_shape) * profile.sar_pixel_m + SAR_MARGIN_M
+    keep &= np.all(np.abs(mid_ego[:, :2] - geometry.center_ego[:2]) < half_extent, axis=1)
     fluctuation = _fluctuation(rng, swerling1, phase)[keep]
     local, velocity = local[keep], velocity[keep]
     amplitude = front_end.amplitude(params, rcs[keep][:, None], local) * fluctuation[:, None]  # [S, P]
