@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 import warnings
 
@@ -167,7 +168,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=512, help="image is size x size pixels")
     parser.add_argument("--pulses", type=int, default=512)
     parser.add_argument("--samples", type=int, default=1024)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5, help="best of this many timed runs")
     parser.add_argument("--device", default="cpu", help="'cuda' adds torch on the GPU")
     args = parser.parse_args()
     # torch.compile's internals warn about their own deprecated APIs.
@@ -194,7 +195,8 @@ def main() -> None:
     scale = np.abs(reference).max()
 
     print(f"image {args.size}x{args.size}, {args.pulses} pulses, {args.samples} range samples, "
-          f"{numba.get_num_threads()} numba threads, {torch.get_num_threads()} torch threads")
+          f"{numba.get_num_threads()} numba threads, {torch.get_num_threads()} torch threads, "
+          f"load average before {os.getloadavg()[0]:.1f} (other processes slow every row alike)")
     print(f"{'method':34s} {'pulses':>6s} {'seconds':>9s} {'G pix*pulse/s':>14s} {'x numpy':>8s} {'max|d|/max':>11s}")
     baseline = None
     for name, fn, pulses in methods:

@@ -1,12 +1,17 @@
 """The CPU backprojection kernel (numba): threads over row segments, SIMD over pixels.
 
 Same float32 arithmetic as the torch backend (see :mod:`zendar_dataset.sar.segments`).
-Two choices make it fast on a CPU:
+What makes it fast on a CPU:
 
-- Loop order: for each row segment, pulses outside and the segment's pixels inside.
-  The pixel loop is branch-free and LLVM vectorises it (AVX-512 where present); the
-  pulse's profile (a few KiB) and the segment's accumulators stay in L1 cache.
+- Loop order: for each row segment, pulses outside and the segment's pixels inside;
+  the pulse's profile (a few KiB) and the segment's accumulators stay in L1 cache.
   Pulses inside, pixels outside measured slower (benchmarks/bench_sar.py).
+- Three pixel loops per pulse: geometry, weights and phase rotation (branch-free,
+  vectorised by LLVM, AVX-512 where present); the indexed profile loads (scalar:
+  LLVM declines gathers on some targets, e.g. AMD Zen 4, and would then leave the
+  whole fused loop scalar; each complex sample moves as one 64-bit word); then
+  interpolation and complex multiply-accumulate (vectorised).
+- ``error_model="numpy"``: Python's division-by-zero check would block SIMD.
 - ``sin``/``cos``: LLVM vectorises ``np.sin``/``np.cos`` only through Intel SVML,
   which numba builds commonly lack; a scalar libm call per pixel-pulse would cost
   more than the rest of the loop. :func:`_cis_neg_turns` is a polynomial on an
@@ -78,7 +83,12 @@ def _kernel(
     out_re,
     out_im,
 ):
-    num_pulses, num_samples = profiles.shape  # positions_xyz is [3, P]
+    """Fill ``out_re``/``out_im`` [H, W] float32.
+
+    ``profiles`` is [P, R] uint64 (complex64 bit patterns), ``positions_xyz`` [3, P]
+    float64, ``origin``/``di``/``dj`` the grid's float64 vectors.
+    """
+    num_pulses, num_samples = profiles.shape
     num_segments = (width + seg_px - 1) // seg_px
     dj_norm2 = np.float32(dj[0] * dj[0] + dj[1] * dj[1] + dj[2] * dj[2])
     inv_bin32 = np.float32(inv_bin)
