@@ -196,7 +196,7 @@ def main() -> None:
 
     print(f"image {args.size}x{args.size}, {args.pulses} pulses, {args.samples} range samples, "
           f"{numba.get_num_threads()} numba threads, {torch.get_num_threads()} torch threads, "
-          f"load average before {os.getloadavg()[0]:.1f} (other processes slow every row alike)")
+          f"load average before {os.getloadavg()[0]:.1f} (other processes on the machine slow the rows)")
     print(f"{'method':34s} {'pulses':>6s} {'seconds':>9s} {'G pix*pulse/s':>14s} {'x numpy':>8s} {'max|d|/max':>11s}")
     baseline = None
     for name, fn, pulses in methods:
