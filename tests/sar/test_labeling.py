@@ -62,3 +62,6 @@ def test_snr_at_points_combines_projection_and_window(scene):
     assert snr_db[0] == pytest.approx(SPOT_SNR_DB, abs=0.3)
     assert snr_db[1] < 12.0
     assert np.isnan(snr_db[2])
+    # An explicit noise power replaces the estimate: 10x the power is 10 dB less.
+    explicit = snr_at_points_db(image, grid, points[:1], radius_px=1, noise=10 * NOISE_POWER)
+    assert explicit[0] == pytest.approx(SPOT_SNR_DB - 10, abs=0.3)

@@ -127,11 +127,13 @@ def snr_at_points_db(
     *,
     radius_px: int = 2,
     max_out_of_plane_m: float = math.inf,
+    noise: float | None = None,
 ) -> np.ndarray:
     """SAR SNR (dB) at points in the grid's frame; NaN where they miss the image.
 
-    Combines :func:`project_points` and :func:`local_snr_db`; ``points`` is (N, 3).
+    Combines :func:`project_points` and :func:`local_snr_db` (see them for the
+    arguments); ``points`` is (N, 3), the result (N,).
     """
     pixel_ij, inside = project_points(grid, points, max_out_of_plane_m=max_out_of_plane_m)
-    snr_db = local_snr_db(image, pixel_ij, radius_px=radius_px)
+    snr_db = local_snr_db(image, pixel_ij, radius_px=radius_px, noise=noise)
     return np.where(inside, snr_db, np.nan)
