@@ -172,6 +172,17 @@ def test_bad_calibration_lists_every_problem():
         assert fragment in text
 
 
+@pytest.mark.parametrize(
+    ("rx_positions_m", "found"), [([[0, 0, 0], [0, 1]], "None"), ([["a", 0, 0]], "None"), (None, "[]")]
+)
+def test_unreadable_rx_positions_are_a_problem_not_a_crash(rx_positions_m, found):
+    calibration = make_calibration()
+    calibration["sensors"]["left"]["rx_positions_m"] = rx_positions_m
+    with pytest.raises(ZendarFormatError) as info:
+        Calibration.from_json(calibration)
+    assert info.value.problems == [f"calibration: sensors.left.rx_positions_m: expected shape [A, 3] with A >= 1, found {found}"]
+
+
 def test_calibration_json_round_trip():
     calibration = Calibration.from_json(make_calibration())
     again = Calibration.from_json(calibration.to_json())

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from zendar_dataset._arrays import float64_array_or_none
 from zendar_dataset.errors import ZendarFormatError
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
@@ -100,7 +101,7 @@ class RadarCalibration(SensorCalibration):
                 problems.append(f"{name}.{key}: expected a positive number, found {value!r}")
             else:
                 setattr(self, key, float(value))
-        positions = np.asarray(self.rx_positions_m, dtype=np.float64) if _is_numeric(self.rx_positions_m) else None
+        positions = float64_array_or_none(self.rx_positions_m)
         if positions is None or positions.ndim != 2 or positions.shape[1] != 3 or positions.shape[0] < 1:
             shape = None if positions is None else list(positions.shape)
             problems.append(f"{name}.rx_positions_m: expected shape [A, 3] with A >= 1, found {shape}")
@@ -139,14 +140,6 @@ class CameraCalibration(SensorCalibration):
             else:
                 setattr(self, key, int(value))
         return problems
-
-
-def _is_numeric(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 _RADAR_KEYS = {f.name for f in fields(RadarCalibration)}

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from zendar_dataset._arrays import float64_array_or_none
 from zendar_dataset.errors import ZendarFormatError
 
 SPEED_OF_LIGHT_MPS = 299_792_458.0
@@ -87,7 +88,7 @@ class FmcwParams:
                 problems.append(f"{name} must be a positive integer, got {value!r}")
             else:
                 object.__setattr__(self, name, int(value))
-        rx = np.array(self.rx_positions_m, dtype=np.float64, copy=True) if _is_numeric(self.rx_positions_m) else None
+        rx = float64_array_or_none(self.rx_positions_m)
         if rx is None or rx.ndim != 2 or rx.shape[1] != 3 or rx.shape[0] < 1 or not np.all(np.isfinite(rx)):
             shape = getattr(rx, "shape", None)
             problems.append(f"rx_positions_m must be a finite [A, 3] array of metres with A >= 1, got shape {shape}")
@@ -252,14 +253,6 @@ class FmcwParams:
             return True
         step = np.diff(rx, axis=0)
         return bool(np.allclose(step, step[0], atol=1e-9 * max(1.0, float(np.abs(rx).max()))))
-
-
-def _is_numeric(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 def beat_signal_exact(
