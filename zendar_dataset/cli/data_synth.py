@@ -33,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
     parser.add_argument("--withhold-test-labels", action="store_true",
                         help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")
+    parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
+                        help="worker processes, one scene each at a time (default: the usable CPUs, at most the "
+                        "scenes left; 1 = in this process); the output does not depend on it")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 
@@ -42,6 +45,8 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.scenes is not None and args.scenes < 1:
         raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
+    if args.jobs is not None and args.jobs < 1:
+        raise ZendarError(f"--jobs must be at least 1, got {args.jobs}")
     out = synthesize_dataset(
         args.out,
         profile=args.profile,
@@ -51,6 +56,7 @@ def _run(args: argparse.Namespace) -> int:
         backend=args.backend,
         progress=not args.quiet,
         withhold_test_labels=args.withhold_test_labels,
+        jobs=args.jobs,
     )
     print(f"wrote {out}")
     return 0

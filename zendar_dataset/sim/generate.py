@@ -5,14 +5,21 @@ scene is written; scenes are written through the atomic ``SceneWriter``, so a
 scene store at its final path is complete.  Re-running with the same settings
 skips the complete scenes; a directory holding anything else is refused, never
 overwritten.
+
+Parallel: scenes are independent (each seeds its own random streams and is
+published by its own atomic rename), so ``jobs`` worker processes write one
+scene each at a time and the bytes do not depend on ``jobs``.  Workers are
+started with ``spawn``: numba's GNU OpenMP thread pool is not fork-safe.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import pathlib
 import shutil
+import signal
 
 from tqdm import tqdm
 
@@ -83,6 +90,27 @@ def _remove_interrupted(out: pathlib.Path) -> None:
             shutil.rmtree(entry, ignore_errors=True) if entry.is_dir() else entry.unlink()
 
 
+class SceneSynthesisError(RuntimeError):
+    """Simulating or writing one scene failed; ``scene_id`` names it and the message carries the cause."""
+
+    def __init__(self, scene_id: str, message: str) -> None:
+        super().__init__(f"{scene_id}: {message}")
+        self.scene_id = scene_id
+        self.cause_message = message
+
+    def __reduce__(self):
+        # Rebuilt from both arguments when it crosses from a worker process.
+        return (type(self), (self.scene_id, self.cause_message))
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask, not the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity API (macOS, Windows)
+        return os.cpu_count() or 1
+
+
 def synthesize_dataset(
     out: str | os.PathLike,
     profile: str | SimProfile = "demo",
@@ -92,6 +120,7 @@ def synthesize_dataset(
     backend: str = "zarr",
     progress: bool = True,
     withhold_test_labels: bool = False,
+    jobs: int | None = None,
 ) -> pathlib.Path:
     """Write a synthetic dataset to ``out`` (or finish an interrupted one).
 
@@ -103,14 +132,19 @@ def synthesize_dataset(
     n_scenes : int, optional
         Default: the profile's ``default_scenes``.
     seed : int
-        Same seed and profile give byte-identical arrays.
+        Same seed and profile give byte-identical arrays, whatever ``jobs``.
     split_ratios : (train, val, test)
     backend : {"zarr", "hdf5"}
     progress : bool
-        Show a tqdm progress bar over scenes.
+        Show a tqdm progress bar over scenes (it advances as each scene is finished).
     withhold_test_labels : bool
         Write test scenes without ``labels/moving_cars`` and put their ground
         truth in ``OUT/test_ground_truth.json`` (the ``export-gt`` layout).
+    jobs : int, optional
+        Worker processes, each writing one scene at a time. Default: the usable
+        CPUs (:func:`usable_cpus`); never more than the scenes left to write.
+        ``1`` simulates in this process. Each worker's numba and BLAS threads
+        are capped so that ``jobs * threads`` does not exceed the usable CPUs.
 
     Returns
     -------
@@ -121,6 +155,9 @@ def synthesize_dataset(
     ------
     ZendarError
         When ``out`` holds something else, or an argument is invalid.
+    SceneSynthesisError
+        When simulating a scene fails (the message names the scene and the cause);
+        the scenes finished before it are kept and a re-run resumes.
     """
     profile = get_profile(profile)
     n_scenes = profile.default_scenes if n_scenes is None else int(n_scenes)
@@ -128,26 +165,29 @@ def synthesize_dataset(
         raise ZendarError(f"the number of scenes must be at least 1, got {n_scenes}")
     if backend not in BACKEND_SUFFIX:
         raise ZendarError(f"backend must be one of {sorted(BACKEND_SUFFIX)}, got {backend!r}")
+    if jobs is not None and (not isinstance(jobs, int) or jobs < 1):
+        raise ZendarError(f"jobs must be a positive integer, got {jobs!r}")
     splits = split_scene_ids(n_scenes, split_ratios)
     out = pathlib.Path(out)
     _prepare_output(out, _settings(profile, n_scenes, seed, split_ratios, backend, withhold_test_labels))
     _remove_interrupted(out)
     writer = DatasetWriter(out, f"zendar-sim-{profile.name}", backend=backend, overwrite=True)
-    calibration = ego_model.calibration(profile)
     test_ids = set(splits["test"])
-    scene_ids = [f"scene-{i:04d}" for i in range(n_scenes)]
-    for index, scene_id in enumerate(tqdm(scene_ids, desc=f"synth {profile.name}", unit="scene", disable=not progress)):
-        gt_path = out / GROUND_TRUTH_DIR / f"{scene_id}.json"
-        withhold = withhold_test_labels and scene_id in test_ids
-        if writer.scene_path(scene_id).exists() and (not withhold or gt_path.exists()):
-            continue
-        truth = build_scene(profile, seed, index)
-        origin = {"lat_deg": truth.enu.lat_deg, "lon_deg": truth.enu.lon_deg, "height_m": truth.enu.height_m}
-        with writer.scene(scene_id, enu_origin=origin, calibration=calibration, overwrite=False) as scene:
-            labels = write_scene(scene, truth, profile, seed, index, with_labels=not withhold)
-        if withhold:
-            gt_path.parent.mkdir(exist_ok=True)
-            write_json_atomic(gt_path, _frames(scene_id, labels, truth, profile))
+    todo = []
+    for index in range(n_scenes):
+        task = _SceneTask(out, profile, seed, backend, index, withhold_test_labels and f"scene-{index:04d}" in test_ids)
+        if not task.is_complete(writer):
+            todo.append(task)
+    bar = tqdm(total=n_scenes, initial=n_scenes - len(todo), desc=f"synth {profile.name}", unit="scene", disable=not progress)
+    with bar:
+        cpus = usable_cpus()
+        n_jobs = min(cpus if jobs is None else jobs, len(todo))
+        if n_jobs <= 1:
+            for task in todo:
+                _run_task(task)
+                bar.update()
+        else:
+            _run_in_workers(out, todo, n_jobs, max(1, cpus // n_jobs), bar)
     writer.finalize(splits)
     if withhold_test_labels:
         frames: dict = {}
@@ -155,6 +195,75 @@ def synthesize_dataset(
             frames.update(json.loads((out / GROUND_TRUTH_DIR / f"{scene_id}.json").read_text(encoding="utf-8")))
         write_json_atomic(out / TEST_GROUND_TRUTH, {"frames": frames})
     return out
+
+
+class _SceneTask:
+    """One scene to simulate and write (picklable, sent to a worker process)."""
+
+    def __init__(self, out: pathlib.Path, profile: SimProfile, seed: int, backend: str, index: int, withhold: bool) -> None:
+        self.out, self.profile, self.seed, self.backend = out, profile, seed, backend
+        self.index, self.withhold = index, withhold
+        self.scene_id = f"scene-{index:04d}"
+        self.gt_path = out / GROUND_TRUTH_DIR / f"{self.scene_id}.json"
+
+    def is_complete(self, writer: DatasetWriter) -> bool:
+        return writer.scene_path(self.scene_id).exists() and (not self.withhold or self.gt_path.exists())
+
+    def run(self) -> None:
+        profile = self.profile
+        writer = DatasetWriter(self.out, f"zendar-sim-{profile.name}", backend=self.backend, overwrite=True)
+        truth = build_scene(profile, self.seed, self.index)
+        origin = {"lat_deg": truth.enu.lat_deg, "lon_deg": truth.enu.lon_deg, "height_m": truth.enu.height_m}
+        calibration = ego_model.calibration(profile)
+        # A store already at its final path is complete but lacks its withheld ground truth
+        # (interrupted between the two writes): simulate it again to get the labels.
+        rewrite = writer.scene_path(self.scene_id).exists()
+        with writer.scene(self.scene_id, enu_origin=origin, calibration=calibration, overwrite=rewrite) as scene:
+            labels = write_scene(scene, truth, profile, self.seed, self.index, with_labels=not self.withhold)
+        if self.withhold:
+            self.gt_path.parent.mkdir(exist_ok=True)
+            write_json_atomic(self.gt_path, _frames(self.scene_id, labels, truth, profile))
+
+
+def _run_task(task: _SceneTask) -> str:
+    """Run ``task``; any failure comes back naming the scene (picklable, so it crosses processes)."""
+    try:
+        task.run()
+    except ZendarError as exc:
+        raise ZendarError(f"{task.scene_id}: {exc}") from exc
+    except Exception as exc:
+        raise SceneSynthesisError(task.scene_id, f"{type(exc).__name__}: {exc}") from exc
+    return task.scene_id
+
+
+def _init_worker(threads: int) -> None:
+    """Worker set-up: leave Ctrl-C to the parent, and cap numba and BLAS/OpenMP threads."""
+    global _THREAD_LIMITS
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import numba
+    from threadpoolctl import threadpool_limits
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    _THREAD_LIMITS = threadpool_limits(limits=threads)  # kept alive: the limits hold while it exists
+
+
+_THREAD_LIMITS = None
+
+
+def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, threads: int, bar: tqdm) -> None:
+    """Run ``todo`` on ``jobs`` spawned processes; on an error or Ctrl-C stop them all and remove partial scenes."""
+    pool = multiprocessing.get_context("spawn").Pool(jobs, initializer=_init_worker, initargs=(threads,))
+    try:
+        for _scene_id in pool.imap_unordered(_run_task, todo):
+            bar.update()
+        pool.close()
+    except BaseException:
+        # Killed workers leave hidden temporary stores, never a scene at its final path.
+        pool.terminate()
+        pool.join()
+        _remove_interrupted(out)
+        raise
+    pool.join()
 
 
 def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:
@@ -170,4 +279,4 @@ def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:
     return frames
 
 
-__all__ = ["DATASET_JSON", "synthesize_dataset", "split_scene_ids"]
+__all__ = ["DATASET_JSON", "SceneSynthesisError", "synthesize_dataset", "split_scene_ids", "usable_cpus"]
