@@ -9,10 +9,16 @@ range-Doppler coupling of the carrier), whose windowed DFT is the window's
 response ``W(x_m - r)``; it carries the carrier and residual-video phase
 ``f_c tau_m - S tau_m^2 / 2`` of that chirp; and the antennas add the steering
 phase.  So per scatterer we evaluate ``W`` only on the ``2K + 1`` bins around the
-peak for every chirp (this keeps range migration across the frame exact), do
-a short Doppler FFT per kept bin, and add the result into the cube with a
-sparse matrix product over scatterers.  Cost: ``S (2K + 1) D log D`` instead of
-``S N D A`` sample evaluations.
+peak for every chirp (this keeps range migration across the frame exact) and
+add it, times the chirp's phase and each antenna's steering, into a
+range-compressed slow-time cube ``[N, D, A]``; one Doppler FFT of that cube
+finishes the job (the FFT is linear, so this equals a Doppler FFT per scatterer).
+Cost: ``S (2K + 1) D A`` multiply-adds and ``N A`` short FFTs instead of
+``S N D A`` sample evaluations and a 2-D FFT.
+
+The per-scatterer loops are numba kernels: the same sums written with numpy
+broadcasting build ``[S, K, D, A]`` complex128 temporaries (~60 MB per demo
+cube) and spent most of the simulator's time moving them through memory.
 """
 
 from __future__ import annotations
@@ -21,9 +27,9 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
+import numba
 import numpy as np
 import scipy.fft
-import scipy.sparse
 
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import WindowSpec, window_values
@@ -65,25 +71,23 @@ class RangeResponse:
         # d/dnu of the tabulated part, for first-order shifts of the tone.
         self.table_rate = (self.window * (2j * np.pi * (k - (self.n - 1) / 2.0) / self.n)) @ kernel
 
-    def _interpolate(self, table: np.ndarray, nu: np.ndarray) -> np.ndarray:
-        pos = (nu - self.nu_min) * self.oversample
-        pos = np.clip(pos, 0.0, table.shape[0] - 1.000001)
-        lower = pos.astype(np.int64)
-        frac = pos - lower
-        return table[lower] * (1.0 - frac) + table[lower + 1] * frac
-
     def __call__(self, nu: np.ndarray) -> np.ndarray:
         """``W(nu)`` for ``|nu| <= K + 1`` (complex128, same shape as ``nu``)."""
         nu = np.asarray(nu, dtype=np.float64)
-        return self._interpolate(self.table, nu) * np.exp(1j * np.pi * nu * (self.n - 1) / self.n)
+        pos = np.clip((nu - self.nu_min) * self.oversample, 0.0, self.table.shape[0] - 1.000001)
+        lower = pos.astype(np.int64)
+        frac = pos - lower
+        centered = self.table[lower] * (1.0 - frac) + self.table[lower + 1] * frac
+        return centered * np.exp(1j * np.pi * nu * (self.n - 1) / self.n)
 
-    def with_derivative(self, nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``W(nu)`` and ``dW/dnu`` (complex128, same shape as ``nu``)."""
-        nu = np.asarray(nu, dtype=np.float64)
-        linear_rate = 1j * np.pi * (self.n - 1) / self.n
-        phase = np.exp(linear_rate * nu)
-        centered = self._interpolate(self.table, nu)
-        return centered * phase, (self._interpolate(self.table_rate, nu) + linear_rate * centered) * phase
+
+@numba.njit(cache=True, inline="always")
+def _interpolate(table: np.ndarray, nu_min: float, oversample: int, nu: float) -> complex:
+    """``RangeResponse`` table at ``nu``, linearly interpolated and clamped to the table (as ``__call__``)."""
+    pos = min(max((nu - nu_min) * oversample, 0.0), table.shape[0] - 1.000001)
+    lower = int(pos)
+    frac = pos - lower
+    return table[lower] * (1.0 - frac) + table[lower + 1] * frac
 
 
 @lru_cache(maxsize=16)
@@ -170,29 +174,52 @@ def synthesize_cube(
     bin_offset = params.slope_hz_per_s * delay_offset * n_samples / params.sample_rate_hz  # [S, A]
 
     response = range_response(window_values(range_window, n_samples), half_width_bins)
-    offsets = np.arange(-half_width_bins, half_width_bins + 1)
     peak = np.rint(bins[:, n_chirps // 2]).astype(np.int64)  # [S]
-    kept = peak[:, None] + offsets[None, :]  # [S, K]
-    # [S, D, K]: the response of chirp m at each kept bin.
-    h, h_rate = response.with_derivative(bins[:, :, None] - kept[:, None, :])
     w_d = window_values(doppler_window, n_chirps)
     slow = amplitudes[:, None] * w_d[None, :] * np.exp(2j * np.pi * cycles)  # [S, D]
     if n_chirps % 2 == 0:
+        # (-1)^m in slow time is the fftshift of an even-length Doppler axis.
         slow = slow * np.where(np.arange(n_chirps) % 2 == 0, 1.0, -1.0)[None, :]
-    spectra = scipy.fft.fft(slow[:, None, :, None] * np.stack([h, h_rate], axis=1), axis=2)  # [S, 2, D, K]
-    if n_chirps % 2:
-        spectra = scipy.fft.fftshift(spectra, axes=2)
-    spectra = np.transpose(spectra, (0, 1, 3, 2))  # [S, 2, K, D]
-    # Rows of the cube each (scatterer, kept bin) lands in (the DFT is periodic).
-    rows = np.mod(kept, n_samples).reshape(-1)
-    contributions = (
-        spectra[:, 0, :, :, None] + spectra[:, 1, :, :, None] * bin_offset[:, None, None, :]
-    ) * steering[:, None, None, :]  # [S, K, D, A]
-    scatter = scipy.sparse.csr_matrix(
-        (np.ones(rows.shape[0]), (rows, np.arange(rows.shape[0]))), shape=(n_samples, rows.shape[0])
+    slow_time = np.zeros((n_samples, n_chirps, n_rx), dtype=np.complex128)
+    _add_scatterer_chirps(
+        slow_time, slow, bins, peak, steering, bin_offset, int(half_width_bins),
+        response.table, response.table_rate, response.nu_min, response.oversample,
     )
-    cube[:] = (scatter @ contributions.reshape(rows.shape[0], n_chirps * n_rx)).reshape(n_samples, n_chirps, n_rx)
+    spectra = scipy.fft.fft(slow_time, axis=1, workers=1)
+    if n_chirps % 2:
+        spectra = scipy.fft.fftshift(spectra, axes=1)
+    cube[:] = spectra
     return cube
+
+
+@numba.njit(cache=True)
+def _add_scatterer_chirps(
+    out, slow, bins, peak, steering, bin_offset, half_width, table, table_rate, nu_min, oversample
+):
+    """``out[r, m, a] += slow[s, m] (W + W' bin_offset[s, a])(bins[s, m] - r) steering[s, a]``.
+
+    Over the ``2 K + 1`` kept bins ``r`` around ``peak[s]`` (wrapped: the DFT is
+    periodic); ``W`` and ``dW/dnu`` come from the ``RangeResponse`` tables.
+    """
+    n_samples, n_chirps, n_rx = out.shape
+    linear = np.pi * (n_samples - 1) / n_samples
+    # nu drops by one bin per kept bin: the linear phase advances by a constant factor.
+    step = complex(np.cos(linear), -np.sin(linear))
+    for s in range(slow.shape[0]):
+        for m in range(n_chirps):
+            nu = bins[s, m] - (peak[s] - half_width)
+            phase = complex(np.cos(linear * nu), np.sin(linear * nu))
+            for k in range(-half_width, half_width + 1):
+                row = (peak[s] + k) % n_samples
+                centered = _interpolate(table, nu_min, oversample, nu)
+                h = centered * phase
+                h_rate = (_interpolate(table_rate, nu_min, oversample, nu) + 1j * linear * centered) * phase
+                base = slow[s, m] * h
+                rate = slow[s, m] * h_rate
+                for a in range(n_rx):
+                    out[row, m, a] += (base + rate * bin_offset[s, a]) * steering[s, a]
+                nu -= 1.0
+                phase *= step
 
 
 def synthesize_range_profiles(
@@ -242,16 +269,30 @@ def synthesize_range_profiles(
     ) / SPEED_OF_LIGHT_MPS
     bins, cycles = _tone_bins_and_cycles(params, tau, tau_rate)
     response = range_response(window_values(range_window, n_samples), half_width_bins)
-    offsets = np.arange(-half_width_bins, half_width_bins + 1)
-    kept = np.rint(bins).astype(np.int64)[:, :, None] + offsets  # [P, S, K]
-    values = (np.asarray(amplitudes, dtype=np.complex128) * np.exp(2j * np.pi * cycles))[:, :, None] * response(
-        bins[:, :, None] - kept
+    values = np.asarray(amplitudes, dtype=np.complex128) * np.exp(2j * np.pi * cycles)  # [P, S]
+    out = np.zeros((n_pulses, n_samples), dtype=np.complex128)
+    _add_scatterer_pulses(
+        out, values, bins, np.rint(bins).astype(np.int64), int(half_width_bins),
+        response.table, response.nu_min, response.oversample,
     )
-    flat = (np.arange(n_pulses)[:, None, None] * n_samples + np.mod(kept, n_samples)).reshape(-1)
-    size = n_pulses * n_samples
-    real = np.bincount(flat, weights=values.real.reshape(-1), minlength=size)
-    imag = np.bincount(flat, weights=values.imag.reshape(-1), minlength=size)
-    return (real + 1j * imag).astype(np.complex64).reshape(n_pulses, n_samples)
+    return out.astype(np.complex64)
+
+
+@numba.njit(cache=True)
+def _add_scatterer_pulses(out, values, bins, peak, half_width, table, nu_min, oversample):
+    """``out[p, r] += values[p, s] W(bins[p, s] - r)`` over the ``2 K + 1`` bins ``r`` around ``peak[p, s]``."""
+    n_samples = out.shape[1]
+    linear = np.pi * (n_samples - 1) / n_samples
+    # nu drops by one bin per kept bin: the linear phase advances by a constant factor.
+    step = complex(np.cos(linear), -np.sin(linear))
+    for p in range(values.shape[0]):
+        for s in range(values.shape[1]):
+            nu = bins[p, s] - (peak[p, s] - half_width)
+            phase = values[p, s] * complex(np.cos(linear * nu), np.sin(linear * nu))
+            for k in range(-half_width, half_width + 1):
+                out[p, (peak[p, s] + k) % n_samples] += _interpolate(table, nu_min, oversample, nu) * phase
+                nu -= 1.0
+                phase *= step
 
 
 @dataclass(frozen=True)
