@@ -9,6 +9,7 @@ import pathlib
 import numpy as np
 import pytest
 
+from tests.datasets import calibration_json
 from zendar_dataset.format import DatasetWriter
 
 R, D, A = 16, 8, 4
@@ -21,31 +22,7 @@ ENU_ORIGIN = {"lat_deg": 37.7749, "lon_deg": -122.4194, "height_m": 12.5}
 
 def make_calibration() -> dict:
     """A calibration with two radars, a camera, a lidar and the IMU."""
-    identity = [1.0, 0.0, 0.0, 0.0]
-    half = np.sqrt(0.5)
-    radar = {
-        "center_frequency_hz": 77e9,
-        "bandwidth_hz": 833e6,
-        "range_bin_m": 0.18,
-        "doppler_bin_mps": 0.1,
-        "rx_positions_m": [[0.0, 0.0019 * a, 0.0] for a in range(A)],
-    }
-    return {
-        "sensors": {
-            "left": {"rotation_wxyz": [half, 0.0, 0.0, half], "translation_m": [-1.0, 0.9, 0.5], **radar},
-            "right": {"rotation_wxyz": [half, 0.0, 0.0, -half], "translation_m": [-1.0, -0.9, 0.5], **radar},
-            "front": {
-                "rotation_wxyz": [0.5, -0.5, 0.5, -0.5],
-                "translation_m": [-1.5, 0.0, 1.4],
-                "K": [[5.0, 0.0, 4.0], [0.0, 5.0, 3.0], [0.0, 0.0, 1.0]],
-                "distortion": [0.0, 0.0, 0.0, 0.0, 0.0],
-                "width": CAM_W,
-                "height": CAM_H,
-            },
-            "top": {"rotation_wxyz": identity, "translation_m": [-1.8, 0.0, 1.9]},
-            "imu": {"rotation_wxyz": [0.0, 1.0, 0.0, 0.0], "translation_m": [-2.0, 0.0, 0.3]},
-        }
-    }
+    return calibration_json(n_rx=A, camera_width=CAM_W, camera_height=CAM_H, imu_translation_m=[-2.0, 0.0, 0.3])
 
 
 def write_scene(writer, rng: np.random.Generator, *, n_frames: int = 4, labels: bool = True) -> None:

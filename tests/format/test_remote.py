@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import socket
-
 import numpy as np
 import pytest
 
@@ -13,39 +11,15 @@ from zendar_dataset.format import open_dataset
 from zendar_dataset.format.ground_truth import ground_truth_frames
 from zendar_dataset.format.validate import validate_dataset
 
-moto_server = pytest.importorskip("moto.server")
-s3fs = pytest.importorskip("s3fs")
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def s3_endpoint():
-    port = _free_port()
-    server = moto_server.ThreadedMotoServer(ip_address="127.0.0.1", port=port)
-    server.start()
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        server.stop()
-
 
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["zarr", "hdf5"])
-def test_open_dataset_from_s3(tmp_path, s3_endpoint, backend):
-    options = {"endpoint_url": s3_endpoint, "key": "x", "secret": "x"}
-    fs = s3fs.S3FileSystem(anon=False, key="x", secret="x", client_kwargs={"endpoint_url": s3_endpoint})
-    bucket = f"zendar-{backend}"
-    fs.mkdir(bucket)
+def test_open_dataset_from_s3(tmp_path, s3_server, backend):
+    options = s3_server.storage_options
     local = make_dataset(tmp_path / backend, backend, seed=5)
-    fs.put(str(local) + "/", f"{bucket}/root/", recursive=True)
-    url = f"s3://{bucket}/root"
+    url = s3_server.upload(local, f"zendar-{backend}")
 
-    remote = open_dataset(url, storage_options={**options})
+    remote = open_dataset(url, storage_options=options)
     reference = open_dataset(local)
     assert remote.splits == reference.splits
     for scene_id in ("s0", "s3"):
@@ -61,4 +35,4 @@ def test_open_dataset_from_s3(tmp_path, s3_endpoint, backend):
     with pytest.raises(ZendarFormatError, match="unknown scene"):
         remote.open_scene("nope")
     with pytest.raises(ZendarFormatError, match="expected dataset.json"):
-        open_dataset(f"s3://{bucket}/elsewhere", storage_options=options)
+        open_dataset(url.replace("/root", "/elsewhere"), storage_options=options)

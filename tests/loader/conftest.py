@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.datasets import calibration_json
 from zendar_dataset.format import DatasetWriter
 
 R, D, A = 8, 4, 2
@@ -23,36 +24,13 @@ MS = 1_000_000
 T0_NS = 1_300_000_000_000_000_000
 A_M = 6378137.0
 SPEED_MPS = 10.0
-IMU_IN_EGO = {"rotation_wxyz": [0.0, 1.0, 0.0, 0.0], "translation_m": [-1.0, 0.0, 0.5]}
+IMU_TRANSLATION_M = [-1.0, 0.0, 0.5]
 # At (0°, 0°) heading north, level: IMU forward = +z, right = east = +y, down = -x (ECEF).
 ECEF_R_IMU = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
 
 
 def calibration() -> dict:
-    radar = {
-        "center_frequency_hz": 77e9,
-        "bandwidth_hz": 833e6,
-        "range_bin_m": 0.18,
-        "doppler_bin_mps": 0.1,
-        "rx_positions_m": [[0.0, 0.0019 * a, 0.0] for a in range(A)],
-    }
-    half = float(np.sqrt(0.5))
-    return {
-        "sensors": {
-            "left": {"rotation_wxyz": [half, 0.0, 0.0, half], "translation_m": [-1.0, 0.9, 0.5], **radar},
-            "right": {"rotation_wxyz": [half, 0.0, 0.0, -half], "translation_m": [-1.0, -0.9, 0.5], **radar},
-            "front": {
-                "rotation_wxyz": [0.5, -0.5, 0.5, -0.5],
-                "translation_m": [-1.5, 0.0, 1.4],
-                "K": [[5.0, 0.0, 3.0], [0.0, 5.0, 2.0], [0.0, 0.0, 1.0]],
-                "distortion": [0.0] * 5,
-                "width": CAM_W,
-                "height": CAM_H,
-            },
-            "top": {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [-1.8, 0.0, 1.9]},
-            "imu": IMU_IN_EGO,
-        }
-    }
+    return calibration_json(n_rx=A, camera_width=CAM_W, camera_height=CAM_H, imu_translation_m=IMU_TRANSLATION_M)
 
 
 def sar_times(n):
