@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import PredictionsError, ZendarError
-from zendar_dataset.eval.ap import PrecisionRecall, average_precision
+from zendar_dataset.eval.ap import PrecisionRecall, band_steps, curve_from_steps
 from zendar_dataset.eval.bootstrap import BandDetections, bootstrap_intervals
-from zendar_dataset.eval.matching import UNMATCHED, match_frames
+from zendar_dataset.eval.matching import UNMATCHED, match_and_band
 from zendar_dataset.eval.protocol import (
     BANDS_M,
     DEFAULT_MAX_BYTES,
@@ -151,42 +151,36 @@ def score_tables(
         gt_evaluated = evaluated_frame[ground_truth.frame_of_row]
     else:
         gt_evaluated = np.ones(len(ground_truth.x_m), dtype=bool)
-    score = predictions.score
-
-    matched = match_frames(
+    band_names = list(BANDS_M)
+    band_low_m = np.array([BANDS_M[b][0] for b in band_names])
+    band_high_m = np.array([BANDS_M[b][1] for b in band_names])
+    matched, band_bits = match_and_band(
         predictions.x_m,
         predictions.y_m,
-        score,
+        predictions.score,
         predictions.offsets,
         pred_gt_frame,
         ground_truth.x_m,
         ground_truth.y_m,
         ground_truth.offsets,
+        band_low_m,
+        band_high_m,
     )
     is_tp = matched != UNMATCHED
     gt_range_m = range_m(ground_truth.x_m, ground_truth.y_m)
-    # A TP lives in its ground truth's band, an FP in its own: this is what keeps a correct
-    # detection straddling a band edge from scoring one FP plus one miss.
-    detection_range_m = range_m(predictions.x_m, predictions.y_m)
-    detection_range_m[is_tp] = gt_range_m[matched[is_tp]]
-
-    # One sort by descending score serves every band (a band is a mask of the sorted arrays).
-    # Ties form one step, so their order within the sort does not matter and an unstable sort will do.
-    order = np.argsort(-score)
-    score, is_tp, detection_range_m = score[order], is_tp[order], detection_range_m[order]
 
     metrics: dict[str, Any] = {"ap": {}, "counts": {}, "pr_curves": {}}
-    band_masks = {}
-    for band in BANDS_M:
-        detection_in = in_band(detection_range_m, band)
+    gt_masks = {}
+    steps = band_steps(predictions.score, is_tp, band_bits, len(band_names))
+    for band, (step_score, tp_cumulative, fp_cumulative) in zip(band_names, steps):
         gt_in = in_band(gt_range_m, band) & gt_evaluated
-        band_masks[band] = (detection_in, gt_in)
+        gt_masks[band] = gt_in
         n_gt = int(gt_in.sum())
-        band_score, band_is_tp = score[detection_in], is_tp[detection_in]
-        ap, curve = average_precision(band_score, band_is_tp, n_gt, presorted=True)
+        ap, curve = curve_from_steps(step_score, tp_cumulative, fp_cumulative, n_gt)
         metrics["ap"][band] = ap
-        n_tp = int(band_is_tp.sum())
-        metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": len(band_score) - n_tp}
+        n_tp = int(tp_cumulative[-1]) if len(tp_cumulative) else 0
+        n_fp = int(fp_cumulative[-1]) if len(fp_cumulative) else 0
+        metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": n_fp}
         metrics["pr_curves"][band] = _curve_json(curve)
 
     evaluated_ids = predictions.frame_ids if partial else ground_truth.frame_ids
@@ -196,18 +190,20 @@ def score_tables(
     metrics["n_frames"] = len(predictions.frame_ids) if partial else len(ground_truth.frame_ids)
     metrics["n_frames_ground_truth"] = len(ground_truth.frame_ids)
     metrics["n_scenes"] = len(scenes)
-    metrics["n_predictions"] = int(len(score))
+    metrics["n_predictions"] = len(predictions.score)
     if bootstrap:
         scene_index = {name: k for k, name in enumerate(scenes)}
         gt_frame_scene = np.array(
             [scene_index.get(scene_of(f), -1) for f in ground_truth.frame_ids], dtype=np.int64
         )
         gt_scene = gt_frame_scene[ground_truth.frame_of_row]
-        pred_scene = np.repeat(gt_frame_scene[pred_gt_frame], predictions.counts)[order]
-        bands = {
-            band: BandDetections(score[d_in], is_tp[d_in], pred_scene[d_in], gt_scene[g_in])
-            for band, (d_in, g_in) in band_masks.items()
-        }
+        pred_scene = np.repeat(gt_frame_scene[pred_gt_frame], predictions.counts)
+        bands = {}
+        for b, band in enumerate(band_names):
+            d_in = (band_bits >> b) & 1 == 1
+            bands[band] = BandDetections(
+                predictions.score[d_in], is_tp[d_in], pred_scene[d_in], gt_scene[gt_masks[band]]
+            )
         metrics["bootstrap"] = bootstrap_intervals(bands, len(scenes), bootstrap, seed)
     return metrics
 
