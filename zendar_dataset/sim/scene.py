@@ -24,9 +24,8 @@ from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
 from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m
 from zendar_dataset.sim.traffic import make_traffic
-from zendar_dataset.sim.trajectory import speed_profile
+from zendar_dataset.sim.trajectory import follow_road, speed_profile
 from zendar_dataset.sim.world import Road, World, build_static_world
-from zendar_dataset.sim.traffic import _road_trajectory
 
 GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
 PAD_S = 1.5
@@ -72,7 +71,7 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
     time_s = time_s - PAD_S
     road_end = cruise * (duration + 2 * PAD_S) + 160.0
     road = Road.from_curvature(-120.0, road_end, curvature)
-    ego = _road_trajectory(road, time_s, speed, -cruise * PAD_S, 0.0, 1.0)
+    ego = follow_road(road, time_s, speed, -cruise * PAD_S)
 
     rng = stream_rng(seed, scene_index, "world")
     boxes, scatterers = build_static_world(rng, road, -cruise * PAD_S - 40.0, road_end - 40.0, profile.facade_spacing_m)

@@ -10,19 +10,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from zendar_dataset.sim.trajectory import SAMPLE_INTERVAL_S, Trajectory, follow_path, speed_profile
+from zendar_dataset.sim.trajectory import SAMPLE_INTERVAL_S, follow_path, follow_road, speed_profile
 from zendar_dataset.sim.world import LANE_WIDTH_M, MovingCar, Road, car_scatterers
 
 KINDS = ("ahead", "oncoming", "crossing", "turning")
 
 
-def _road_trajectory(road: Road, time_s: np.ndarray, speed: np.ndarray, s0: float, lateral: float, direction: float) -> Trajectory:
-    dt = time_s[1] - time_s[0]
-    travelled = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt)])
-    position, yaw = road.point(s0 + direction * travelled, lateral)
-    if direction < 0:
-        yaw = yaw + np.pi
-    return Trajectory(time_s, position, yaw, speed)
+def _straight(s_m: np.ndarray) -> np.ndarray:
+    """Zero curvature: a crossing car drives straight across the road."""
+    return np.zeros_like(s_m)
+
+
+def _quarter_turn(turn_start_m: float, radius_m: float, sign: float):
+    """Curvature ``sign / radius_m`` over a quarter circle that starts ``turn_start_m`` along the path."""
+
+    def curvature(s_m: np.ndarray) -> np.ndarray:
+        return np.where((s_m > turn_start_m) & (s_m < turn_start_m + np.pi / 2 * radius_m), sign / radius_m, 0.0)
+
+    return curvature
 
 
 def make_traffic(
@@ -47,10 +52,10 @@ def make_traffic(
         time_s = time_s + t_start_s
         if kind == "ahead":
             s0 = ego_s_at_start_m + rng.uniform(8.0, 40.0)
-            trajectory = _road_trajectory(road, time_s, speed, s0, 0.0, 1.0)
+            trajectory = follow_road(road, time_s, speed, s0)
         elif kind == "oncoming":
             s0 = ego_s_at_start_m + rng.uniform(20.0, 25.0 + (cruise + ego_speed_mps) * duration_s)
-            trajectory = _road_trajectory(road, time_s, speed, s0, LANE_WIDTH_M, -1.0)
+            trajectory = follow_road(road, time_s, speed, s0, lateral_m=LANE_WIDTH_M, against_road=True)
         else:
             s_cross = ego_s_at_start_m + rng.uniform(10.0, 30.0 + ego_speed_mps * duration_s)
             side = float(rng.choice([-1.0, 1.0]))
@@ -58,16 +63,12 @@ def make_traffic(
             start, road_yaw = road.point(s_cross + (LANE_WIDTH_M / 2 if side > 0 else 0.0), side * lead)
             heading = float(road_yaw) - side * np.pi / 2
             if kind == "crossing":
-                kappa = lambda s: np.zeros_like(s)  # noqa: E731 - a one-line curvature profile
+                curvature = _straight
             else:
                 radius = rng.uniform(6.0, 10.0)
-                turn_start = lead - radius
                 # Turn towards the road's far end: right when coming from the left side.
-                sign = -side
-                kappa = lambda s, a=turn_start, r=radius, g=sign: np.where(  # noqa: E731
-                    (s > a) & (s < a + np.pi / 2 * r), g / r, 0.0
-                )
-            trajectory = follow_path(time_s, speed, start, heading, kappa)
+                curvature = _quarter_turn(lead - radius, radius, -side)
+            trajectory = follow_path(time_s, speed, start, heading, curvature)
         cars.append(MovingCar(track_id, trajectory, size, car_scatterers(rng, size)))
     return cars
 

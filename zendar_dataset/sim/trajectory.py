@@ -9,8 +9,12 @@ position within ~1e-6 m of the smooth curve (well under the 3.9 mm wavelength).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # world.py builds on Trajectory, so the import would be circular at run time
+    from zendar_dataset.sim.world import Road
 
 SAMPLE_INTERVAL_S = 1e-3
 
@@ -104,6 +108,43 @@ def speed_profile(
     return time_s, speed
 
 
+def travelled_distance_m(time_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
+    """``[T]`` float64 arc length covered since ``time_s[0]`` (trapezoidal rule on a uniform grid)."""
+    dt = time_s[1] - time_s[0]
+    return np.concatenate([[0.0], np.cumsum(0.5 * (speed_mps[1:] + speed_mps[:-1]) * dt)])
+
+
+def follow_road(
+    road: Road,
+    time_s: np.ndarray,
+    speed_mps: np.ndarray,
+    start_s_m: float,
+    *,
+    lateral_m: float = 0.0,
+    against_road: bool = False,
+) -> Trajectory:
+    """Drive along the road's reference line at a fixed left offset.
+
+    Parameters
+    ----------
+    road : Road
+        The road whose arc length ``s`` the body follows.
+    time_s, speed_mps : numpy.ndarray
+        ``[T]`` float64 uniform times and speeds, as from :func:`speed_profile`.
+    start_s_m : float
+        Arc length at ``time_s[0]``, metres.
+    lateral_m : float
+        Offset to the left of the reference line, metres (one lane width for the oncoming lane).
+    against_road : bool
+        Drive towards decreasing ``s`` (heading turned by pi).
+    """
+    direction = -1.0 if against_road else 1.0
+    position, yaw = road.point(start_s_m + direction * travelled_distance_m(time_s, speed_mps), lateral_m)
+    if against_road:
+        yaw = yaw + np.pi
+    return Trajectory(time_s, position, yaw, speed_mps)
+
+
 def follow_path(
     time_s: np.ndarray,
     speed_mps: np.ndarray,
@@ -112,8 +153,7 @@ def follow_path(
     curvature_at: callable,
 ) -> Trajectory:
     """Integrate a path with curvature ``curvature_at(s)`` (1/m) travelled at ``speed_mps``."""
-    dt = time_s[1] - time_s[0]
-    distance = np.concatenate([[0.0], np.cumsum(0.5 * (speed_mps[1:] + speed_mps[:-1]) * dt)])
+    distance = travelled_distance_m(time_s, speed_mps)
     kappa = curvature_at(distance)
     yaw = start_yaw_rad + np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * np.diff(distance))])
     step = np.diff(distance)
