@@ -33,6 +33,7 @@ from zendar_dataset import ZendarDataset
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import format_table, prepare_out_dir, write_atomically, write_metrics
+from zendar_dataset.format import frame_id
 from zendar_dataset.geometry import LocalENU, PoseInterpolator
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.radar import FmcwParams, detect, detections_to_points, estimate_azimuth
@@ -130,25 +131,29 @@ def run(root: str, split: str, out: Path) -> int:
     poses: dict[str, EgoPoses] = {}
     n_points = n_cars_labelled = 0
     for batch in loader:
-        for b, frame_id in enumerate(batch["frame_id"]):
+        for b, frame in enumerate(batch["frame_id"]):
             scene_id = batch["scene_id"][b]
             if scene_id not in poses:
                 poses[scene_id] = scene_poses(ds, scene_id)
             sensors = ds.scene_reader(scene_id).calibration.sensors
             frame_ns = int(batch["timestamp_ns"][b])
             points, snrs = [], []
-            for radar, window in batch["radar"].items():
+            for radar, window in batch["radar"].items():  # front_left, front_right
                 cube_ns = int(window["timestamp_ns"][b, -1])
                 points_ego, snr = moving_points(window["cube"][b, -1].numpy(), cube_ns, sensors[radar], poses[scene_id])
                 # Ego frame at the cube's time -> ego frame at the SAR frame's time (the evaluator's frame).
                 points.append(poses[scene_id].ecef_to_ego(poses[scene_id].ego_to_ecef(points_ego, cube_ns), frame_ns))
                 snrs.append(snr)
             points_ego, snr = np.concatenate(points), np.concatenate(snrs)
-            results[frame_id] = cluster_cars(points_ego, snr)
+            results[frame] = cluster_cars(points_ego, snr)
             n_points += len(points_ego)
             # Labels collate to {field: [per-item tensor]}, or a list holding None where withheld.
             labels = batch["labels"]
             n_cars_labelled += len(labels["x"][b]) if isinstance(labels, dict) else 0
+    # Frames the loader left out (e.g. a radar window it could not fill) still need an entry.
+    for scene_id in ds.scene_ids:
+        for timestamp_ns in ds.scene_reader(scene_id).timestamps(ds.sync_table(scene_id).reference):
+            results.setdefault(frame_id(scene_id, int(timestamp_ns)), [])
     n_predictions = sum(len(cars) for cars in results.values())
     print(f"[2] detect: {len(results)} frames, {n_points} moving radar points -> {n_predictions} predicted cars "
           f"({n_cars_labelled} labelled)")
