@@ -158,3 +158,26 @@ def test_partial_scores_only_the_present_frames():
     metrics = evaluate({"results": {"s/1": [{"x": 5.0, "y": 0.0, "score": 0.9}]}}, ground_truth, partial=True)
     assert metrics["counts"]["mid"]["gt"] == 0  # s/2's ground truth is not counted
     assert metrics["ap"]["near"] == 1.0 and metrics["ap"]["mid"] is None
+
+
+@pytest.mark.parametrize(
+    ("bad", "expected"),
+    [
+        ({"yaw": True}, "'yaw' must be a number, got bool"),
+        ({"length": math.inf}, "'length' is not finite"),
+        ({"vy": 10**400}, "'vy' is too large"),
+    ],
+)
+def test_optional_fields_on_every_detection_are_checked_column_wise(bad, expected):
+    # Every detection carries optional fields (the common case): valid ones score as if absent,
+    # and one bad value among them is still named by frame and index.
+    extra = {"length": 4.5, "width": 1.8, "yaw": 0.1, "vx": 3.0, "vy": -1, "note": "ignored"}
+    plain = {f"s/{k}": [{"x": 5.0 + i, "y": 0.0, "score": 0.1 * i} for i in range(3)] for k in range(4)}
+    frames = {"frames": {frame_id: [{"x": 5.0, "y": 0.0}] for frame_id in plain}}
+    rich = {f: [dict(d, **extra) for d in detections] for f, detections in plain.items()}
+    assert evaluate({"results": rich}, frames)["ap"] == evaluate({"results": plain}, frames)["ap"]
+    rich["s/2"][1].update(bad)
+    problems = problems_of({"results": rich}, frames)
+    assert len(problems) == 1
+    assert problems[0].startswith("predictions frame 's/2' detection 1: ")
+    assert expected in problems[0]

@@ -194,20 +194,68 @@ def _detection_problems(
     return problems
 
 
-def _columns(
-    flat: list[Any], required: tuple[str, ...]
-) -> dict[str, np.ndarray] | None:
-    """Fast path: the required columns as float64, or None if any value is missing or not a number."""
-    try:
-        lists = {key: [detection[key] for detection in flat] for key in required}
-    except (KeyError, TypeError, IndexError):
-        return None
-    if not all(set(map(type, values)) <= _NUMBER_TYPES for values in lists.values()):
+def _number_column(values: list[Any]) -> np.ndarray | None:
+    """float64 (N,) of ``values``, or None if any is not an int or float (bool is refused) or overflows."""
+    if not set(map(type, values)) <= _NUMBER_TYPES:
         return None
     try:
-        return {key: np.array(values, dtype=np.float64) for key, values in lists.items()}
+        return np.fromiter(values, dtype=np.float64, count=len(values))
     except OverflowError:
         return None
+
+
+def _columns(flat: list[Any], required: tuple[str, ...]) -> dict[str, np.ndarray] | None:
+    """Fast path: the required columns as float64, or None if any value is missing or not a number."""
+    columns = {}
+    for key in required:
+        try:
+            column = _number_column([detection[key] for detection in flat])
+        except (KeyError, TypeError, IndexError):
+            return None
+        if column is None:
+            return None
+        columns[key] = column
+    return columns
+
+
+def _optional_suspects(flat: list[dict], optional: tuple[str, ...]) -> np.ndarray:
+    """bool (N,): detections whose optional fields need the per-detection check."""
+    suspect = np.zeros(len(flat), dtype=bool)
+    for key in optional:
+        column = _number_column([detection.get(key, 0.0) for detection in flat])  # absent is fine
+        if column is None:  # a value of the wrong type: let the per-detection check name it
+            suspect |= np.fromiter((key in d for d in flat), dtype=bool, count=len(flat))
+        else:
+            suspect |= ~np.isfinite(column)
+    return suspect
+
+
+def _frame_problems(
+    frames: dict, who: str, max_per_frame: int | None
+) -> tuple[list[str], list[str], list[str], list[list]]:
+    """Per-frame checks: (problems, all string frame ids, ids of frames with a list, those lists)."""
+    problems: list[str] = []
+    all_frame_ids: list[str] = []
+    frame_ids: list[str] = []
+    lists: list[list] = []
+    for frame_id, detections in frames.items():
+        if not isinstance(frame_id, str):
+            problems.append(f"{who} frame id {_short(frame_id)} is not a string")
+            continue
+        all_frame_ids.append(frame_id)
+        if not isinstance(detections, list):
+            problems.append(
+                f"{who} frame {frame_id!r}: expected a list of detections, got {_type_name(detections)}"
+            )
+            continue
+        if max_per_frame is not None and len(detections) > max_per_frame:
+            problems.append(
+                f"{who} frame {frame_id!r}: {len(detections)} detections, more than the limit of "
+                f"{max_per_frame} per frame"
+            )
+        frame_ids.append(frame_id)
+        lists.append(detections)
+    return problems, all_frame_ids, frame_ids, lists
 
 
 def read_frames(
@@ -238,28 +286,14 @@ def read_frames(
     CheckedInput
     """
     problems: list[str] = []
-    all_frame_ids: list[str] = []
-    frame_ids: list[str] = []
-    lists: list[list] = []
-    for frame_id, detections in frames.items():
-        if not isinstance(frame_id, str):
-            problems.append(f"{who} frame id {_short(frame_id)} is not a string")
-            continue
-        all_frame_ids.append(frame_id)
-        if not isinstance(detections, list):
-            problems.append(
-                f"{who} frame {frame_id!r}: expected a list of detections, got {_type_name(detections)}"
-            )
-            continue
-        if max_per_frame is not None and len(detections) > max_per_frame:
-            problems.append(
-                f"{who} frame {frame_id!r}: {len(detections)} detections, more than the limit of "
-                f"{max_per_frame} per frame"
-            )
-        frame_ids.append(frame_id)
-        lists.append(detections)
-
-    counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+    frame_ids = all_frame_ids = list(frames)
+    lists = list(frames.values())
+    frames_ok = set(map(type, frame_ids)) <= {str} and set(map(type, lists)) <= {list}
+    counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists)) if frames_ok else None
+    if counts is None or (max_per_frame is not None and len(counts) and counts.max() > max_per_frame):
+        # Something is wrong with the frames themselves: find and name each.
+        problems, all_frame_ids, frame_ids, lists = _frame_problems(frames, who, max_per_frame)
+        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
     offsets = np.zeros(len(lists) + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     flat = list(chain.from_iterable(lists))
@@ -275,7 +309,7 @@ def read_frames(
         suspect = ~finite
         # Detections with more keys than the required ones may carry optional fields to check.
         if optional and set(map(len, flat)) - {len(required)}:
-            suspect |= np.fromiter((len(d) != len(required) for d in flat), dtype=bool, count=len(flat))
+            suspect |= _optional_suspects(flat, optional)
         suspects = np.flatnonzero(suspect)
 
     if len(suspects):
