@@ -1,15 +1,18 @@
 """Whole synthetic datasets: validity, determinism, resume and refusal, the CLI."""
 
 import json
+import shutil
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.validate import validate_dataset
-from zendar_dataset.sim.generate import split_scene_ids, synthesize_dataset
+from zendar_dataset.sim.generate import SceneSynthesisError, split_scene_ids, synthesize_dataset
 
 
 def _arrays(root):
@@ -30,17 +33,74 @@ def _arrays(root):
     return out
 
 
+def _files(root):
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _temporaries(root):
+    return [p.name for p in (root / "scenes").iterdir() if ".tmp-" in p.name]
+
+
 @pytest.mark.slow
-def test_same_seed_gives_byte_identical_valid_datasets(tmp_path):
-    a = synthesize_dataset(tmp_path / "a", "tiny", n_scenes=1, seed=7, progress=False)
-    b = synthesize_dataset(tmp_path / "b", "tiny", n_scenes=1, seed=7, progress=False)
+def test_same_seed_gives_byte_identical_valid_datasets_whatever_the_jobs(tmp_path):
+    a = synthesize_dataset(tmp_path / "a", "tiny", n_scenes=2, seed=7, progress=False, jobs=1)
+    b = synthesize_dataset(tmp_path / "b", "tiny", n_scenes=2, seed=7, progress=False, jobs=2)
     assert validate_dataset(a) == []
     arrays_a, arrays_b = _arrays(a), _arrays(b)
-    assert arrays_a.keys() == arrays_b.keys() and len(arrays_a) > 10
+    assert arrays_a.keys() == arrays_b.keys() and len(arrays_a) > 20
     for key in arrays_a:
         assert arrays_a[key].tobytes() == arrays_b[key].tobytes(), key
-    labels = arrays_a["scene-0000.zarr/labels/moving_cars/x"]
-    assert labels.size > 0
+    # Not only the arrays: every file, metadata included.
+    files_a, files_b = _files(a), _files(b)
+    assert files_a.keys() == files_b.keys()
+    assert [name for name in files_a if files_a[name] != files_b[name]] == []
+    assert arrays_a["scene-0000.zarr/labels/moving_cars/x"].size > 0
+    assert not np.array_equal(arrays_a["scene-0000.zarr/tracklog/position_ecef"], arrays_a["scene-0001.zarr/tracklog/position_ecef"])
+
+
+@pytest.mark.slow
+def test_a_failing_worker_names_its_scene_keeps_the_others_and_a_rerun_resumes(tmp_path):
+    out = tmp_path / "ds"
+    kwargs = dict(profile="tiny", n_scenes=2, seed=3, split_ratios=(0.5, 0.0, 0.5), progress=False,
+                  withhold_test_labels=True, jobs=2)
+    synthesize_dataset(out, **kwargs)
+    for scene in ("scene-0000.zarr", "scene-0001.zarr"):
+        shutil.rmtree(out / "scenes" / scene)
+    # scene-0001's ground truth cannot be written: a directory of the user's is in the way.
+    blocker = out / "ground_truth" / "scene-0001.json"
+    blocker.unlink()
+    blocker.mkdir()
+    (blocker / "mine.txt").write_text("keep me")
+    with pytest.raises(SceneSynthesisError, match="scene-0001: .*Error") as caught:
+        synthesize_dataset(out, **kwargs)
+    assert caught.value.scene_id == "scene-0001"
+    assert (out / "scenes" / "scene-0000.zarr").is_dir() and _temporaries(out) == []
+    assert (blocker / "mine.txt").read_text() == "keep me"
+    shutil.rmtree(blocker)
+    synthesize_dataset(out, **kwargs)
+    assert validate_dataset(out) == []
+    frames = json.loads((out / "test_ground_truth.json").read_text())["frames"]
+    assert frames and all(key.startswith("scene-0001/") for key in frames)
+
+
+@pytest.mark.slow
+def test_ctrl_c_leaves_no_partial_scene_and_a_rerun_finishes(tmp_path):
+    out = tmp_path / "ds"
+    cmd = [sys.executable, "-m", "zendar_dataset.cli.data", "synth", str(out), "--profile", "tiny", "--scenes", "3",
+           "--jobs", "2", "--quiet"]
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not ((out / "scenes").is_dir() and _temporaries(out)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _temporaries(out), "no scene was started"
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert _temporaries(out) == [] and not (out / "dataset.json").exists()
+    finished = subprocess.run(cmd, capture_output=True, text=True)
+    assert finished.returncode == 0, finished.stderr
+    assert validate_dataset(out) == []
+    assert sorted(p.name for p in (out / "scenes").iterdir()) == [f"scene-{i:04d}.zarr" for i in range(3)]
 
 
 @pytest.mark.slow
@@ -67,6 +127,8 @@ def test_cli_writes_a_valid_dataset_resumes_and_refuses_foreign_directories(tmp_
     # Other settings, or a user's directory: refused with exit 2 and nothing touched.
     other = subprocess.run(cmd[:-6] + ["--seed", "2", "--quiet"], capture_output=True, text=True)
     assert other.returncode == 2 and "other settings" in other.stderr
+    no_jobs = subprocess.run(cmd + ["--jobs", "0"], capture_output=True, text=True)
+    assert no_jobs.returncode == 2 and "--jobs" in no_jobs.stderr
     user_dir = tmp_path / "mine"
     user_dir.mkdir()
     (user_dir / "notes.txt").write_text("keep me")

@@ -14,10 +14,12 @@ started with ``spawn``: numba's GNU OpenMP thread pool is not fork-safe.
 
 from __future__ import annotations
 
+import itertools
 import json
 import multiprocessing
 import os
 import pathlib
+import queue
 import shutil
 import signal
 
@@ -156,8 +158,9 @@ def synthesize_dataset(
     ZendarError
         When ``out`` holds something else, or an argument is invalid.
     SceneSynthesisError
-        When simulating a scene fails (the message names the scene and the cause);
-        the scenes finished before it are kept and a re-run resumes.
+        When simulating a scene fails (the message names the scene and the cause).
+        No scene is started after it; the ones finished (also those in progress
+        in other workers) are kept and a re-run resumes.
     """
     profile = get_profile(profile)
     n_scenes = profile.default_scenes if n_scenes is None else int(n_scenes)
@@ -251,11 +254,32 @@ _THREAD_LIMITS = None
 
 
 def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, threads: int, bar: tqdm) -> None:
-    """Run ``todo`` on ``jobs`` spawned processes; on an error or Ctrl-C stop them all and remove partial scenes."""
+    """Run ``todo`` on ``jobs`` spawned processes, handing out one scene per free worker.
+
+    After a scene fails no new one is started, the scenes in progress are
+    finished (kept for the re-run), and the first failure is raised. Ctrl-C
+    stops every worker at once; their hidden temporary stores are removed.
+    """
+    outcomes: queue.SimpleQueue = queue.SimpleQueue()
     pool = multiprocessing.get_context("spawn").Pool(jobs, initializer=_init_worker, initargs=(threads,))
     try:
-        for _scene_id in pool.imap_unordered(_run_task, todo):
-            bar.update()
+        pending = iter(todo)
+        in_flight = 0
+        failure: BaseException | None = None
+        for task in itertools.islice(pending, jobs):
+            pool.apply_async(_run_task, (task,), callback=outcomes.put, error_callback=outcomes.put)
+            in_flight += 1
+        while in_flight:
+            outcome = outcomes.get()
+            in_flight -= 1
+            if isinstance(outcome, BaseException):
+                failure = failure or outcome
+            else:
+                bar.update()
+            task = next(pending, None) if failure is None else None
+            if task is not None:
+                pool.apply_async(_run_task, (task,), callback=outcomes.put, error_callback=outcomes.put)
+                in_flight += 1
         pool.close()
     except BaseException:
         # Killed workers leave hidden temporary stores, never a scene at its final path.
@@ -264,6 +288,8 @@ def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, thread
         _remove_interrupted(out)
         raise
     pool.join()
+    if failure is not None:
+        raise failure
 
 
 def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:
