@@ -197,8 +197,12 @@ class SceneWriter:
             )
         stream.timestamps.append(timestamp_ns)
 
-    def _append_frame(self, stream: _Stream, name: str, frame: np.ndarray, kind: str) -> None:
-        """Append one frame to a bulk array stored one frame per chunk."""
+    def _append_frame(self, stream: _Stream, timestamp_ns: Any, name: str, frame: np.ndarray, kind: str) -> None:
+        """Stamp and append one frame to a bulk array stored one frame per chunk.
+
+        A frame of the wrong shape is rejected without its timestamp, so the stream stays consistent.
+        """
+        self._stamp(stream, timestamp_ns)
         if stream.bulk is None:
             stream.frame_shape = frame.shape
             stream.bulk = stores.create_array(
@@ -211,6 +215,7 @@ class SceneWriter:
                 resizable=True,
             )
         elif frame.shape != stream.frame_shape:
+            stream.timestamps.pop()
             raise ZendarFormatError(
                 f"{self.scene_id}: {stream.path}/{name}: expected every frame of shape {list(stream.frame_shape)}, "
                 f"found {list(frame.shape)}"
@@ -229,12 +234,7 @@ class SceneWriter:
                 f"{self.scene_id}: {stream.path}/cube: expected A={antennas} antennas (rx_positions_m), "
                 f"found {cube.shape[2]}"
             )
-        self._stamp(stream, timestamp_ns)
-        try:
-            self._append_frame(stream, "cube", cube, stores.RAW)
-        except ZendarFormatError:
-            stream.timestamps.pop()
-            raise
+        self._append_frame(stream, timestamp_ns, "cube", cube, stores.RAW)
 
     def append_sar(
         self,
@@ -263,12 +263,7 @@ class SceneWriter:
         aperture = _as(aperture_ns, "int64", (2,), f"{where}/aperture_ns")
         if aperture[0] > aperture[1]:
             raise ZendarFormatError(f"{where}/aperture_ns: expected start <= end, found {aperture.tolist()}")
-        self._stamp(stream, timestamp_ns)
-        try:
-            self._append_frame(stream, "image", image, stores.RAW)
-        except ZendarFormatError:
-            stream.timestamps.pop()
-            raise
+        self._append_frame(stream, timestamp_ns, "image", image, stores.RAW)
         for name, vector in (*vectors.items(), ("aperture_ns", aperture)):
             stream.small.setdefault(name, []).append(vector)
 
@@ -286,12 +281,7 @@ class SceneWriter:
                 f"{where}: expected [height={calibration.height}, width={calibration.width}, 3] from the calibration, "
                 f"found {list(image.shape)}"
             )
-        self._stamp(stream, timestamp_ns)
-        try:
-            self._append_frame(stream, "image", image, stores.FAST)
-        except ZendarFormatError:
-            stream.timestamps.pop()
-            raise
+        self._append_frame(stream, timestamp_ns, "image", image, stores.FAST)
 
     def append_lidar(self, sensor: str, timestamp_ns: int, points: np.ndarray) -> None:
         """Append a lidar sweep ``[P, 4]`` float32 (x, y, z in the lidar frame in metres, intensity)."""
