@@ -10,7 +10,8 @@ import pytest
 from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, T0_NS, A, D, R, make_calibration
 from tests.format.helpers import corrupt_chunk, replace_array, set_attr
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import SceneReader, SceneWriter, open_dataset
+from zendar_dataset.format import FORMAT_NAME, FORMAT_VERSION, SceneReader, SceneWriter, open_dataset
+from zendar_dataset.format.reader import check_dataset_json
 
 
 def _scene_path(root, scene_id, backend):
@@ -127,6 +128,14 @@ def test_bad_dataset_json(tmp_path, dataset_root):
     assert len(info.value.problems) == 2
     assert "format_version: expected 1, found 2" in str(info.value)
     assert "splits.val: expected scene 'ghost' in scenes" in str(info.value)
+
+
+def test_dataset_json_scenes_and_splits_must_be_objects():
+    document = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "name": "x", "scenes": ["s0"], "splits": None}
+    assert check_dataset_json(document, "dataset.json") == [
+        "dataset.json: scenes: expected {scene_id: {\"path\": ...}}, found ['s0']",
+        "dataset.json: splits: expected {split: [scene_id, ...]}, found None",
+    ]
 
 
 def test_scene_id_mismatch_and_missing_store(dataset_root, backend):

@@ -36,6 +36,15 @@ def _read_text(location: str, storage_options: dict | None) -> str:
         return handle.read()
 
 
+def _object_member(document: dict, key: str, expected: str, where: str, problems: list[str]) -> dict:
+    """``document[key]`` when it is a JSON object; otherwise note the problem and return ``{}``."""
+    value = document.get(key)
+    if isinstance(value, dict):
+        return value
+    problems.append(f"{where}: {key}: expected {expected}, found {value!r}")
+    return {}
+
+
 def check_dataset_json(document: Any, where: str) -> list[str]:
     """Every violation of the ``dataset.json`` schema (docs/format.md)."""
     if not isinstance(document, dict):
@@ -47,20 +56,14 @@ def check_dataset_json(document: Any, where: str) -> list[str]:
         problems.append(f"{where}: format_version: expected {FORMAT_VERSION}, found {document.get('format_version')!r}")
     if not isinstance(document.get("name"), str):
         problems.append(f"{where}: name: expected a string, found {document.get('name')!r}")
-    scenes = document.get("scenes")
-    if not isinstance(scenes, dict):
-        problems.append(f"{where}: scenes: expected {{scene_id: {{\"path\": ...}}}}, found {scenes!r}")
-        scenes = {}
+    scenes = _object_member(document, "scenes", '{scene_id: {"path": ...}}', where, problems)
     for scene_id, entry in scenes.items():
         path = entry.get("path") if isinstance(entry, dict) else None
         if not isinstance(path, str) or not path:
             problems.append(f"{where}: scenes.{scene_id}.path: expected a relative store path, found {path!r}")
         elif path.startswith("/") or ".." in path.split("/") or not path.endswith(tuple(stores.SUFFIX_BACKEND)):
             problems.append(f"{where}: scenes.{scene_id}.path: expected a relative path ending in .zarr or .h5, found {path!r}")
-    splits = document.get("splits")
-    if not isinstance(splits, dict):
-        problems.append(f"{where}: splits: expected {{split: [scene_id, ...]}}, found {splits!r}")
-        splits = {}
+    splits = _object_member(document, "splits", "{split: [scene_id, ...]}", where, problems)
     for split, scene_ids in splits.items():
         if not isinstance(scene_ids, list) or not all(isinstance(s, str) for s in scene_ids):
             problems.append(f"{where}: splits.{split}: expected a list of scene ids, found {scene_ids!r}")
