@@ -60,7 +60,11 @@ def numpy_per_pulse(profiles, positions, grid):
 @numba.njit(parallel=True, fastmath=True, error_model="numpy")
 def _pulses_inner_kernel(profiles, positions, origin, di, dj, height, width, seg_px, inv_bin, range_offset_m,
                          cycles_per_m, out):
-    """The other loop order: per pixel, SIMD over pulses (same arithmetic as the package kernel)."""
+    """The measured alternative loop order (docs/sar.md): per pixel, SIMD over pulses.
+
+    Same arithmetic as the package kernel, which loops the other way (per pulse, SIMD over a
+    segment's pixels); it lives here, not in the package, because it only serves this comparison.
+    """
     num_pulses, num_samples = profiles.shape
     num_segments = (width + seg_px - 1) // seg_px
     dj_norm2 = np.float32(dj[0] * dj[0] + dj[1] * dj[1] + dj[2] * dj[2])
