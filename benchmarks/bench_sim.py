@@ -1,11 +1,18 @@
 """Simulator costs: cube synthesis (fast vs exact), SAR image, lidar sweep, whole tiny/demo datasets.
 
-Run: python benchmarks/bench_sim.py [--skip-demo]
+The whole-dataset rows compare ``jobs`` worker processes (default: the usable
+CPUs) with ``jobs=1`` (scenes one after another in this process), measured in
+the same run; both write byte-identical datasets.
+
+Run: python benchmarks/bench_sim.py [--skip-demo] [--skip-serial-demo]
+(the demo rows take minutes; the figure quoted in docs/simulator.md is
+``time zendar-data synth /tmp/demo_jobs --profile demo`` on an idle 2-core machine).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import shutil
 import tempfile
@@ -17,7 +24,7 @@ from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.radar.fmcw import beat_signal_exact
 from zendar_dataset.radar.range_doppler import range_doppler
 from zendar_dataset.sim import ego as ego_model
-from zendar_dataset.sim.generate import synthesize_dataset
+from zendar_dataset.sim.generate import synthesize_dataset, usable_cpus
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import get_profile
 from zendar_dataset.sim.radar_model import synthesize_cube
@@ -75,28 +82,35 @@ def bench_scene_parts() -> None:
     print(f"paper-resolution VLP-16 sweep ({beams} firings): {lidar_s * 1e3:.1f} ms")
 
 
-def bench_dataset(name: str) -> None:
+def bench_dataset(name: str, jobs: int, serial_s: float | None) -> float:
+    """Write the profile's default dataset with ``jobs`` workers; print a row; return the seconds."""
     profile = get_profile(name)
     out = pathlib.Path(tempfile.mkdtemp()) / name
     start = time.perf_counter()
-    synthesize_dataset(out, name, progress=False)
+    synthesize_dataset(out, name, progress=False, jobs=jobs)
     seconds = time.perf_counter() - start
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
-    print(f"{name:>8} {profile.default_scenes:7d} {seconds:10.1f} {size / 2**20:10.1f}")
+    ratio = f"{serial_s / seconds:9.2f}" if serial_s is not None else f"{'-':>9}"
+    print(f"{name:>8} {profile.default_scenes:7d} {jobs:5d} {seconds:10.1f} {ratio} {size / 2**20:10.1f}")
     shutil.rmtree(out.parent)
+    return seconds
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--skip-demo", action="store_true", help="skip the demo dataset (minutes)")
+    parser.add_argument("--skip-serial-demo", action="store_true", help="skip the jobs=1 demo reference (minutes)")
     args = parser.parse_args()
     bench_cube()
     bench_scene_parts()
-    print("\nwhole default datasets")
-    print(f"{'profile':>8} {'scenes':>7} {'seconds':>10} {'MiB':>10}")
-    bench_dataset("tiny")
+    cpus = usable_cpus()
+    print(f"\nwhole default datasets ({cpus} usable CPUs, load average before {os.getloadavg()[0]:.1f})")
+    print(f"{'profile':>8} {'scenes':>7} {'jobs':>5} {'seconds':>10} {'speed-up':>9} {'MiB':>10}")
+    serial = bench_dataset("tiny", 1, None)
+    bench_dataset("tiny", cpus, serial)
     if not args.skip_demo:
-        bench_dataset("demo")
+        serial = None if args.skip_serial_demo else bench_dataset("demo", 1, None)
+        bench_dataset("demo", cpus, serial)
 
 
 if __name__ == "__main__":

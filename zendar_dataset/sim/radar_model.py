@@ -43,9 +43,10 @@ class RangeResponse:
 
     ``W(nu) = sum_k w_k exp(j 2 pi k nu / N)`` is the DFT output ``nu`` bins
     below the tone.  ``W`` is tabulated once (without its linear phase
-    ``pi nu (N - 1) / N``, which is restored exactly) at ``1 / oversample`` bin
-    steps for ``|nu| <= half_width + 1`` and interpolated linearly; the
-    tabulated part is smooth, so the interpolation error is ~1e-5 relative.
+    ``pi nu (N - 1) / N``, which the synthesis kernels restore exactly) at
+    ``1 / oversample`` bin steps for ``|nu| <= half_width + 1``, and so is
+    ``dW/dnu``; the kernels interpolate the tables linearly (:func:`_interpolate`);
+    the tabulated part is smooth, so the interpolation error is ~1e-5 relative.
 
     Parameters
     ----------
@@ -71,19 +72,10 @@ class RangeResponse:
         # d/dnu of the tabulated part, for first-order shifts of the tone.
         self.table_rate = (self.window * (2j * np.pi * (k - (self.n - 1) / 2.0) / self.n)) @ kernel
 
-    def __call__(self, nu: np.ndarray) -> np.ndarray:
-        """``W(nu)`` for ``|nu| <= K + 1`` (complex128, same shape as ``nu``)."""
-        nu = np.asarray(nu, dtype=np.float64)
-        pos = np.clip((nu - self.nu_min) * self.oversample, 0.0, self.table.shape[0] - 1.000001)
-        lower = pos.astype(np.int64)
-        frac = pos - lower
-        centered = self.table[lower] * (1.0 - frac) + self.table[lower + 1] * frac
-        return centered * np.exp(1j * np.pi * nu * (self.n - 1) / self.n)
-
 
 @numba.njit(cache=True, inline="always")
 def _interpolate(table: np.ndarray, nu_min: float, oversample: int, nu: float) -> complex:
-    """``RangeResponse`` table at ``nu``, linearly interpolated and clamped to the table (as ``__call__``)."""
+    """A ``RangeResponse`` table at ``nu`` bins, linearly interpolated and clamped to the table's ends."""
     pos = min(max((nu - nu_min) * oversample, 0.0), table.shape[0] - 1.000001)
     lower = int(pos)
     frac = pos - lower
