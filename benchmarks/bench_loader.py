@@ -8,16 +8,19 @@ chunk's byte range, located with h5py's chunk index). The loader reads the same
 cubes as items (reference = the radar, cube_window=1) through a DataLoader with
 batch_size=8 and ``ZendarDataset.collate`` for 0, 1 and 2 workers (persistent, fork).
 The page cache (and the workers) are warmed by one untimed pass; each figure is the
-best of --repeats passes. With workers, a second row gives the ceiling of the
-DataLoader's worker-to-main transfer itself on this machine (items already in
-memory, torch's default collate), to separate our cost from torch's.
+best of --repeats passes (the machine's load average is printed: figures from a busy
+machine are not comparable). With workers, batches leave through each worker's pool of
+recycled shared memory (zendar_dataset.shared_batches); a second row gives torch's own
+worker-to-main transfer on this machine (items already in memory, torch's default
+collate, a fresh shared tensor per batch), the path the pool replaces.
 
-Run: python benchmarks/bench_loader.py [--frames 96] [--repeats 3]
+Run: python benchmarks/bench_loader.py [--frames 96] [--repeats 5]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import tempfile
 import time
@@ -135,10 +138,11 @@ def best_of(repeats: int, fn) -> tuple[float, int]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=96, help="cubes per backend (4 MiB each)")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--batch", type=int, default=8)
     args = parser.parse_args()
 
+    load_before = os.getloadavg()
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-loader-") as tmp:
         for backend in ("zarr", "hdf5"):
@@ -163,6 +167,7 @@ def main() -> None:
                     del ceiling
                     rows.append((backend, f"  in-memory items (no I/O), {workers} workers", seconds, size, raw_s))
 
+    load_after = os.getloadavg()
     print(f"{args.frames} cubes of [{R}, {D}, {A}] complex64 ({R * D * A * 8 / 2**20:.0f} MiB each), "
           f"batch {args.batch}, best of {args.repeats}, warm page cache")
     print(f"{'backend':<8}{'method':<38}{'MB/s':>10}{'items/s':>10}{'vs raw':>9}")
@@ -171,6 +176,8 @@ def main() -> None:
         items_s = args.frames / seconds
         print(f"{backend:<8}{method:<38}{mb_s:>10.0f}{items_s:>10.1f}{raw_s / seconds:>9.2f}")
     print("target: loader >= 0.80 x raw")
+    print(f"load average (1 min) before {load_before[0]:.2f}, after {load_after[0]:.2f}, "
+          f"on {os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":

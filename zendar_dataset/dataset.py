@@ -24,6 +24,7 @@ import pandas as pd
 import torch
 from torch.utils.data import Dataset, get_worker_info
 
+from zendar_dataset import shared_batches
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import SceneReader, StoredArray, frame_id, open_dataset
 from zendar_dataset.format.schema import LABEL_FIELD_NAMES
@@ -115,6 +116,10 @@ class ZendarDataset(Dataset):
         fsspec options for remote roots (e.g. ``{"endpoint_url": ..., "anon": True}``).
     keep_unfilled_windows
         Keep items whose radar window cannot be filled, with that radar set to None.
+    worker_pool_slots
+        Inside a DataLoader worker, radar batches are read into a pool of at most this
+        many recycled shared-memory slots per worker (each the size of one radar's
+        batch); beyond it, batches take torch's ordinary path. 0 turns the pool off.
 
     Notes
     -----
@@ -139,6 +144,7 @@ class ZendarDataset(Dataset):
         transforms: Callable[[dict], Any] | None = None,
         storage_options: dict | None = None,
         keep_unfilled_windows: bool = False,
+        worker_pool_slots: int = 16,
     ) -> None:
         self.streams = _check_streams(streams)
         if isinstance(require, str):
@@ -149,6 +155,9 @@ class ZendarDataset(Dataset):
             _check_keys(tolerance_ms, self.streams, "tolerance_ms")
         if isinstance(cube_window, bool) or not isinstance(cube_window, (int, np.integer)) or cube_window < 1:
             raise ValueError(f"cube_window must be an integer >= 1, got {cube_window!r}")
+        if (isinstance(worker_pool_slots, bool) or not isinstance(worker_pool_slots, (int, np.integer))
+                or worker_pool_slots < 0):
+            raise ValueError(f"worker_pool_slots must be an integer >= 0, got {worker_pool_slots!r}")
         if transforms is not None and not callable(transforms):
             raise ValueError(f"transforms must be callable, got {type(transforms).__name__}")
         self.root = os.fspath(root)
@@ -159,6 +168,7 @@ class ZendarDataset(Dataset):
         self.transforms = transforms
         self.storage_options = dict(storage_options or {})
         self.keep_unfilled_windows = keep_unfilled_windows
+        self.worker_pool_slots = int(worker_pool_slots)
 
         index = open_dataset(self.root, self.storage_options)
         self.dataset_name = index.name
@@ -335,8 +345,9 @@ class ZendarDataset(Dataset):
 
     def __getitems__(self, indices: Sequence[int]) -> list[Any]:
         """Items of one batch (called by the DataLoader): each radar's windows are read
-        straight into one batch buffer, in shared memory inside a worker, so that
-        :meth:`collate` and the transfer to the main process copy nothing."""
+        straight into one batch buffer, inside a worker a recycled shared-memory slot
+        (:mod:`zendar_dataset.shared_batches`), so that :meth:`collate` copies nothing
+        and the main process receives the batch with one kernel copy."""
         located = [self._locate(i) for i in indices]
         buffers: list[dict[str, np.ndarray]] = [{} for _ in located]
         radar_streams = {n for scene, _ in located for n in self._tables[scene].streams if n.startswith("radar/")}
@@ -349,7 +360,9 @@ class ZendarDataset(Dataset):
                 shapes.add(self._array(scene, f"{name}/cube").shape[1:])
             else:
                 if len(shapes) == 1:
-                    batch = _batch_buffer((len(located), self.cube_window, *shapes.pop()), np.complex64)
+                    batch = _batch_buffer(
+                        (len(located), self.cube_window, *shapes.pop()), np.complex64, self.worker_pool_slots
+                    )
                     for b, out in enumerate(batch):
                         buffers[b][name] = out
         return [self._item(scene, row, out) for (scene, row), out in zip(located, buffers)]
@@ -445,13 +458,17 @@ class ZendarDataset(Dataset):
         return _collate(list(batch), path=())
 
 
-def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
-    """An uninitialised array backed by a torch tensor, in shared memory inside a
-    DataLoader worker (as torch's own collate does), so sending it costs no copy."""
+def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype, pool_slots: int = 0) -> np.ndarray:
+    """An uninitialised batch array. Inside a DataLoader worker: a slot of the worker's
+    shared-memory pool, or, with none free, a fresh shared tensor (as torch's own collate
+    makes), so that sending it copies nothing in the worker."""
     torch_dtype = torch.from_numpy(np.zeros(0, dtype=dtype)).dtype
     if get_worker_info() is None:
-        # numpy's allocator reuses freed batch memory (no fresh page faults per batch).
         return torch.from_numpy(np.empty(shape, dtype=dtype)).numpy()
+    if pool_slots > 0:
+        slot_array = shared_batches.worker_pool().buffer(shape, dtype, pool_slots)
+        if slot_array is not None:
+            return slot_array
     nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
     storage = torch.UntypedStorage._new_shared(nbytes)
     return torch.empty(0, dtype=torch_dtype).set_(storage, 0, shape).numpy()
@@ -459,6 +476,9 @@ def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
 
 def _batch_tensor(values: list[Any]) -> torch.Tensor | None:
     """The tensor behind ``values`` when they are exactly the rows of one batch buffer."""
+    in_slot = shared_batches.slot_tensor(values)
+    if in_slot is not None:
+        return in_slot
     base = values[0].base if isinstance(values[0], np.ndarray) else None
     if not isinstance(base, np.ndarray) or not isinstance(base.base, torch.Tensor):
         return None

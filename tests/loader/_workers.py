@@ -30,3 +30,26 @@ def sampler_rank(rank: int, world_size: int, init_file: str, root: str, out_dir:
             json.dump({"rank": rank, "world": dist.get_world_size(), "result": result}, handle)
     finally:
         dist.destroy_process_group()
+
+
+class CollateWithPoolStats:
+    """``ds.collate`` in a worker, returned with what the worker saw: the type of each
+    radar's batched cube before pickling and the worker's pool statistics.
+
+    ``hold`` keeps the first ``hold`` collated batches alive in the worker, so their
+    slots stay leased (forcing the pool to grow, then to fall back)."""
+
+    def __init__(self, dataset, hold: int = 0) -> None:
+        self.dataset = dataset
+        self.hold = hold
+        self.held: list = []
+
+    def __call__(self, items):
+        from zendar_dataset import shared_batches
+
+        batch = self.dataset.collate(items)
+        cube_types = {name: type(radar["cube"]).__name__ if isinstance(radar, dict) else None
+                      for name, radar in batch.get("radar", {}).items()}
+        if len(self.held) < self.hold:
+            self.held.append(batch)
+        return batch, cube_types, shared_batches.worker_pool().stats()

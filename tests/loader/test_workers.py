@@ -1,5 +1,4 @@
 import numpy as np
-import pytest
 import torch
 from torch.utils.data import DataLoader
 
@@ -41,9 +40,3 @@ def check_two_workers(root, start_method):
 
 def test_dataloader_two_workers_fork(dataset_root):
     check_two_workers(dataset_root, "fork")
-
-
-@pytest.mark.slow
-def test_dataloader_two_workers_spawn(hdf5_root):
-    # HDF5 is the backend whose open file handles must not cross processes.
-    check_two_workers(hdf5_root, "spawn")

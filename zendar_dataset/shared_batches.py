@@ -1,0 +1,227 @@
+"""Recycled shared memory for batches leaving DataLoader workers.
+
+A worker that returns a *fresh* shared-memory tensor per batch is limited by the
+page faults of that fresh memory (torch allocates a new segment per batch), about
+1 GB/s per worker. Here each worker keeps a small pool of slots, each an anonymous
+``memfd`` mapped once: its pages are faulted once and then reused batch after batch,
+and nothing is left behind in ``/dev/shm`` (nor limited by its size) if a worker dies.
+
+Life of a slot::
+
+    worker                                   main process
+    ------                                   ------------
+    lease: flag = 1, read cubes into it
+    collate: SlotTensor over the slot
+    pickle: (fd, shape, dtype) -- queue -->  unpickle: preadv into a fresh ordinary
+                                             tensor, then flag = 0 (pwrite)
+    lease again once flag == 0 and no
+    array of the worker still views it
+
+The main process copies with ``preadv`` rather than mapping the slot: the kernel
+fills the fresh destination pages several times faster than a user-space copy that
+faults them one by one, and the user only ever holds ordinary tensors. Both the
+copy and the flag go through the kernel, in that order. A worker never waits for a
+slot: when all are busy (batches prefetched, or dropped with an abandoned iterator)
+the pool grows up to its bound, then the batch takes torch's ordinary path.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import weakref
+from dataclasses import dataclass
+from multiprocessing.reduction import DupFd, ForkingPickler
+from typing import Any
+
+import numpy as np
+import torch
+from torch.multiprocessing.reductions import reduce_tensor
+
+# The flag lives in the first byte; data starts one page in, so it is page aligned.
+HEADER_BYTES = mmap.PAGESIZE
+FREE, BUSY = 0, 1
+# memfd and preadv are Linux's; elsewhere every batch takes torch's ordinary path.
+SUPPORTED = hasattr(os, "memfd_create") and hasattr(os, "preadv")
+
+
+@dataclass(eq=False)
+class _Slot:
+    """One shared-memory segment: ``fd`` (memfd), ``capacity_bytes`` of data after the header."""
+
+    fd: int
+    capacity_bytes: int
+    mapping: mmap.mmap
+    # The worker's array over the slot while any view of it is alive (weak: its death frees the slot).
+    array: weakref.ref | None = None
+    sent: bool = False
+
+    @property
+    def leased(self) -> bool:
+        return self.array is not None
+
+    def is_free(self) -> bool:
+        return not self.leased and self.mapping[0] == FREE
+
+    def close(self) -> None:
+        self.mapping.close()
+        os.close(self.fd)
+
+
+class SlotTensor(torch.Tensor):
+    """A batch tensor over a pool slot, inside a worker. Pickled for the DataLoader's
+    queue it sends the slot's descriptor, not its bytes; operations on it give plain
+    tensors (torch function dispatch is disabled for the subclass)."""
+
+    __torch_function__ = torch._C._disabled_torch_function_impl
+
+    def __deepcopy__(self, memo: dict) -> torch.Tensor:
+        copied = memo[id(self)] = self.as_subclass(torch.Tensor).clone()
+        return copied
+
+    def __reduce_ex__(self, protocol: int) -> Any:
+        # Standard pickling (torch.save, pickle.dumps) stores a plain tensor's bytes.
+        return self.as_subclass(torch.Tensor).__reduce_ex__(protocol)
+
+
+class WorkerBatchPool:
+    """The slots of one worker process, created on demand up to ``max_slots``."""
+
+    def __init__(self) -> None:
+        self.slots: list[_Slot] = []
+        self.leased_by_address: dict[int, _Slot] = {}
+        self.fallbacks = 0
+        self.pid = os.getpid()
+
+    def buffer(self, shape: tuple[int, ...], dtype: np.dtype, max_slots: int) -> np.ndarray | None:
+        """An uninitialised C-contiguous array in a free slot, or None when the pool is
+        at ``max_slots`` and none is free and large enough (the caller falls back)."""
+        dtype = np.dtype(dtype)
+        nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        slot = self._take(nbytes, max_slots) if SUPPORTED else None
+        if slot is None:
+            self.fallbacks += 1
+            return None
+        slot.mapping[0] = BUSY
+        slot.sent = False
+        # Built in one step over the mapping: every view of it (numpy collapses view
+        # chains to the first array over foreign memory) then keeps this very array alive.
+        array = np.ndarray(shape, dtype=dtype, buffer=slot.mapping, offset=HEADER_BYTES)
+        address = array.__array_interface__["data"][0]
+        slot.array = weakref.ref(array)
+        self.leased_by_address[address] = slot
+        weakref.finalize(array, self._release, slot, address)
+        return array
+
+    def _take(self, nbytes: int, max_slots: int) -> _Slot | None:
+        free = [s for s in self.slots if s.is_free()]
+        fitting = [s for s in free if s.capacity_bytes >= nbytes]
+        if fitting:
+            return min(fitting, key=lambda s: s.capacity_bytes)
+        if len(self.slots) >= max_slots:
+            if not free:
+                return None
+            # At the bound: replace a free slot too small for this batch.
+            smallest = min(free, key=lambda s: s.capacity_bytes)
+            self.slots.remove(smallest)
+            smallest.close()
+        capacity = -(-nbytes // mmap.PAGESIZE) * mmap.PAGESIZE
+        fd = os.memfd_create("zendar-batch", os.MFD_CLOEXEC)
+        try:
+            os.ftruncate(fd, HEADER_BYTES + capacity)
+            mapping = mmap.mmap(fd, HEADER_BYTES + capacity)
+        except BaseException:
+            os.close(fd)
+            raise
+        slot = _Slot(fd, capacity, mapping)
+        self.slots.append(slot)
+        return slot
+
+    def _release(self, slot: _Slot, address: int) -> None:
+        """The worker's last view of the slot died: unsent, the slot is free at once;
+        sent, the main process frees it once it has copied the data."""
+        slot.array = None
+        self.leased_by_address.pop(address, None)
+        if not slot.sent and not slot.mapping.closed:
+            slot.mapping[0] = FREE
+
+    def leased_array(self, address: int) -> tuple[_Slot, np.ndarray] | tuple[None, None]:
+        """The slot and the worker's array over it, for the data address of a leased slot."""
+        slot = self.leased_by_address.get(address)
+        array = slot.array() if slot is not None and slot.array is not None else None
+        return (slot, array) if array is not None else (None, None)
+
+    def tensor(self, rows: list[Any]) -> SlotTensor | None:
+        """The slot tensor when ``rows`` are exactly the rows of one leased array, in order."""
+        first = rows[0]
+        if not isinstance(first, np.ndarray):
+            return None
+        _, array = self.leased_array(first.__array_interface__["data"][0])
+        if array is None or array.shape[0] != len(rows):
+            return None
+        start = array.__array_interface__["data"][0]
+        for b, row in enumerate(rows):
+            if not (isinstance(row, np.ndarray) and row.shape == array.shape[1:] and row.dtype == array.dtype
+                    and row.__array_interface__["data"][0] == start + b * array.strides[0]):
+                return None
+        return torch.from_numpy(array).as_subclass(SlotTensor)
+
+    def stats(self) -> dict[str, int]:
+        """``slots`` (created), ``leased`` and ``fallbacks`` (batches that took torch's path)."""
+        return {"slots": len(self.slots), "leased": sum(s.leased for s in self.slots), "fallbacks": self.fallbacks}
+
+
+_POOL: WorkerBatchPool | None = None
+
+
+def worker_pool() -> WorkerBatchPool:
+    """This process's pool (a forked child starts its own: slots are never shared)."""
+    global _POOL
+    if _POOL is None or _POOL.pid != os.getpid():
+        _POOL = WorkerBatchPool()
+    return _POOL
+
+
+def slot_tensor(rows: list[Any]) -> SlotTensor | None:
+    """The slot tensor behind ``rows`` (see :meth:`WorkerBatchPool.tensor`); None outside
+    a process that leased slots."""
+    if _POOL is None or _POOL.pid != os.getpid():
+        return None
+    return _POOL.tensor(rows)
+
+
+def _reduce_slot_tensor(tensor: SlotTensor) -> tuple:
+    plain = tensor.as_subclass(torch.Tensor)
+    nbytes = plain.numel() * plain.element_size()
+    # Found by address rather than carried on the tensor, so that copies of it
+    # (deepcopy, standard pickling) stay ordinary tensors.
+    slot, array = (None, None) if _POOL is None or _POOL.pid != os.getpid() else _POOL.leased_array(plain.data_ptr())
+    if slot is None:
+        return reduce_tensor(plain)
+    if slot.sent or not plain.is_contiguous() or nbytes > array.nbytes:
+        # A slot is sent once: a second send of it copies, the ordinary way.
+        return reduce_tensor(plain.clone())
+    slot.sent = True
+    dtype = str(plain.dtype).removeprefix("torch.")
+    return _rebuild_from_slot, (DupFd(slot.fd), nbytes, tuple(plain.shape), dtype)
+
+
+def _rebuild_from_slot(dup_fd: Any, nbytes: int, shape: tuple[int, ...], dtype: str) -> torch.Tensor:
+    """In the receiving process: copy the slot into an ordinary tensor, then free the slot."""
+    fd = dup_fd.detach()
+    try:
+        out = torch.empty(nbytes, dtype=torch.uint8)
+        view = out.numpy()
+        done = 0
+        while done < nbytes:
+            got = os.preadv(fd, [view[done:]], HEADER_BYTES + done)
+            if got <= 0:
+                raise OSError(f"shared batch slot ended after {done} of {nbytes} bytes")
+            done += got
+        os.pwrite(fd, bytes([FREE]), 0)
+    finally:
+        os.close(fd)
+    return out.view(getattr(torch, dtype)).reshape(shape)
+
+
+ForkingPickler.register(SlotTensor, _reduce_slot_tensor)
