@@ -1,7 +1,9 @@
 """A deliberately plain implementation of the evaluation protocol, written from docs/evaluation.md.
 
-Plain Python loops over dicts; it shares no code with zendar_dataset.eval so that the two can be
-checked against each other.
+Plain Python loops over lists; it shares no code with zendar_dataset.eval so that the two can be
+checked against each other. It is also the baseline of benchmarks/bench_eval.py, so it is plain
+but not careless: reading the dicts (:func:`reference_tables`) is kept apart from scoring
+(:func:`reference_score`), and the precision envelope is one backward pass.
 """
 
 from __future__ import annotations
@@ -18,8 +20,11 @@ def band_contains(band, r):
 
 
 def match_one_frame(predictions, ground_truths):
-    """Return, for each prediction (list order), the index of its ground truth or None."""
-    order = sorted(range(len(predictions)), key=lambda i: -predictions[i]["score"])  # sorted is stable
+    """predictions: [(x, y, score)], ground_truths: [(x, y)].
+
+    Return, for each prediction (list order), the index of its ground truth or None.
+    """
+    order = sorted(range(len(predictions)), key=lambda i: -predictions[i][2])  # sorted is stable
     taken = [False] * len(ground_truths)
     result = [None] * len(predictions)
     for i in order:
@@ -28,8 +33,8 @@ def match_one_frame(predictions, ground_truths):
         for j, gt in enumerate(ground_truths):
             if taken[j]:
                 continue
-            dx = predictions[i]["x"] - gt["x"]
-            dy = predictions[i]["y"] - gt["y"]
+            dx = predictions[i][0] - gt[0]
+            dy = predictions[i][1] - gt[1]
             distance = math.sqrt(dx * dx + dy * dy)
             if distance >= MATCH_DISTANCE_M:
                 continue
@@ -59,13 +64,56 @@ def reference_ap(entries, n_gt):
                 fp += 1
             k += 1
         points.append((tp / n_gt, tp / (tp + fp)))
+    envelope = [0.0] * len(points)  # max precision over this and all later points
+    running = 0.0
+    for n in range(len(points) - 1, -1, -1):
+        running = max(running, points[n][1])
+        envelope[n] = running
     ap = 0.0
     previous_recall = 0.0
     for n, (recall, _) in enumerate(points):
-        envelope = max(p for _, p in points[n:])
-        ap += (recall - previous_recall) * envelope
+        ap += (recall - previous_recall) * envelope[n]
         previous_recall = recall
     return ap
+
+
+def reference_tables(results, frames):
+    """Read the dicts: per ground-truth frame, ([(x, y, score)], [(x, y)])."""
+    tables = []
+    for frame_id, ground_truths in frames.items():
+        predictions = [(d["x"], d["y"], d["score"]) for d in results[frame_id]]
+        tables.append((predictions, [(gt["x"], gt["y"]) for gt in ground_truths]))
+    return tables
+
+
+def reference_score(tables):
+    """Score the output of :func:`reference_tables`.
+
+    Returns {"ap": {band: float | None}, "counts": {band: {"gt", "tp", "fp"}}}.
+    """
+    entries = {band: [] for band in BANDS}
+    counts = {band: {"gt": 0, "tp": 0, "fp": 0} for band in BANDS}
+    for predictions, ground_truths in tables:
+        for x, y in ground_truths:
+            r = math.sqrt(x * x + y * y)
+            for band in BANDS:
+                if band_contains(band, r):
+                    counts[band]["gt"] += 1
+        matches = match_one_frame(predictions, ground_truths)
+        for prediction, match in zip(predictions, matches):
+            if match is None:
+                x, y = prediction[0], prediction[1]
+                kind = "fp"
+            else:
+                x, y = ground_truths[match]
+                kind = "tp"
+            r = math.sqrt(x * x + y * y)
+            for band in BANDS:
+                if band_contains(band, r):
+                    counts[band][kind] += 1
+                    entries[band].append((prediction[2], kind == "tp"))
+    ap = {band: reference_ap(entries[band], counts[band]["gt"]) for band in BANDS}
+    return {"ap": ap, "counts": counts}
 
 
 def reference_evaluate(results, frames):
@@ -73,27 +121,4 @@ def reference_evaluate(results, frames):
 
     Returns {"ap": {band: float | None}, "counts": {band: {"gt", "tp", "fp"}}}.
     """
-    entries = {band: [] for band in BANDS}
-    counts = {band: {"gt": 0, "tp": 0, "fp": 0} for band in BANDS}
-    for frame_id, ground_truths in frames.items():
-        predictions = results[frame_id]
-        for gt in ground_truths:
-            r = math.sqrt(gt["x"] * gt["x"] + gt["y"] * gt["y"])
-            for band in BANDS:
-                if band_contains(band, r):
-                    counts[band]["gt"] += 1
-        matches = match_one_frame(predictions, ground_truths)
-        for prediction, match in zip(predictions, matches):
-            if match is None:
-                where = prediction
-                kind = "fp"
-            else:
-                where = ground_truths[match]
-                kind = "tp"
-            r = math.sqrt(where["x"] * where["x"] + where["y"] * where["y"])
-            for band in BANDS:
-                if band_contains(band, r):
-                    counts[band][kind] += 1
-                    entries[band].append((prediction["score"], kind == "tp"))
-    ap = {band: reference_ap(entries[band], counts[band]["gt"]) for band in BANDS}
-    return {"ap": ap, "counts": counts}
+    return reference_score(reference_tables(results, frames))
