@@ -154,6 +154,8 @@ def score_tables(
     band_names = list(BANDS_M)
     band_low_m = np.array([BANDS_M[b][0] for b in band_names])
     band_high_m = np.array([BANDS_M[b][1] for b in band_names])
+    # A TP lives in its ground truth's band, an FP in its own: this is what keeps a correct
+    # detection straddling a band edge from scoring one FP plus one miss.
     matched, band_bits = match_and_band(
         predictions.x_m,
         predictions.y_m,
@@ -171,6 +173,7 @@ def score_tables(
 
     metrics: dict[str, Any] = {"ap": {}, "counts": {}, "pr_curves": {}}
     gt_masks = {}
+    # Per band, one step per distinct score with cumulative TP/FP counts (ties form one step).
     steps = band_steps(predictions.score, is_tp, band_bits, len(band_names))
     for band, (step_score, tp_cumulative, fp_cumulative) in zip(band_names, steps):
         gt_in = in_band(gt_range_m, band) & gt_evaluated

@@ -3,7 +3,8 @@
 :func:`match_frame` states the rule in a few readable lines; :func:`match_frames` is the same rule
 for many frames at once, compiled with numba because greedy matching is sequential within a frame
 (each prediction's choice depends on the ones before it) and cannot be written as array operations
-without quadratic memory.
+without quadratic memory. :func:`match_and_band` adds each prediction's bands in the same
+compiled call, which is what the evaluator uses.
 """
 
 from __future__ import annotations
