@@ -181,3 +181,21 @@ def test_optional_fields_on_every_detection_are_checked_column_wise(bad, expecte
     assert len(problems) == 1
     assert problems[0].startswith("predictions frame 's/2' detection 1: ")
     assert expected in problems[0]
+
+
+@pytest.mark.parametrize("text", ['{"results": {}}', '{"results": {"s/1": [{"x": NaN}]}}', "{broken"])
+@pytest.mark.parametrize("enabled", [True, False])
+def test_parsing_leaves_the_garbage_collector_as_it_found_it(tmp_path, text, enabled):
+    import gc
+
+    from zendar_dataset.eval.validation import load_document
+
+    path = tmp_path / "p.json"
+    path.write_text(text)
+    was = gc.isenabled()
+    try:
+        gc.enable() if enabled else gc.disable()
+        load_document(path, what="predictions")
+        assert gc.isenabled() is enabled
+    finally:
+        gc.enable() if was else gc.disable()
