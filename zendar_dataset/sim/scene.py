@@ -33,7 +33,12 @@ CUBE_HALF_WIDTH_BINS = 4
 SAR_HALF_WIDTH_BINS = 4
 SAR_MARGIN_M = 5.0
 STREAMS = ("road", "ego", "world", "traffic", "tracklog", "front_left", "front_right", "sar_front_left",
-           "sar_front_right", "lidar", "enu")
+           "sar_front_right", "lidar", "enu", "clocks")
+
+# Free-running sensors are not triggered together: each starts at its own phase within its frame
+# period and its frame times jitter (camera trigger latency, lidar rotation, radar frame scheduling),
+# so the loader's synchronisation has real residuals to measure, as on recorded data.
+CLOCK_JITTER_S = {"radar": 20e-6, "lidar": 200e-6, "camera": 1e-3}
 
 
 def stream_rng(seed: int, scene_index: int, stream: str) -> np.random.Generator:
@@ -212,16 +217,38 @@ def frame_times(duration_s: float, rate_hz: float) -> np.ndarray:
     return (np.arange(int(round(duration_s * rate_hz))) + 0.5) / rate_hz
 
 
+def free_running_times(duration_s: float, rate_hz: float, jitter_s: float, rng: np.random.Generator) -> np.ndarray:
+    """Frame times (scene seconds) of a free-running sensor: a random phase within the first period,
+    then ``rate_hz`` with Gaussian jitter of ``jitter_s`` (clipped to a quarter period, so the times
+    stay strictly increasing), all inside ``[0, duration_s)``."""
+    period = 1.0 / rate_hz
+    n = int(round(duration_s * rate_hz))
+    jitter = np.clip(rng.normal(0.0, jitter_s, n), -period / 4, period / 4)
+    times = rng.uniform(0.0, period) + np.arange(n) * period + jitter
+    return times[(times >= 0.0) & (times < duration_s)]
+
+
 def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene_index: int, *, with_labels: bool = True) -> dict:
     """Simulate every stream of a scene into an open ``SceneWriter``; returns its label rows."""
     duration = profile.scene_duration_s
-    ns = lambda t: truth.start_ns + int(round(float(t) * 1e9))  # noqa: E731 - scene seconds to GPS ns
+
+    def ns(t: float) -> int:
+        """Scene seconds to GPS nanoseconds."""
+        return truth.start_ns + int(round(float(t) * 1e9))
+
+    clocks = stream_rng(seed, scene_index, "clocks")
+    radar_times = {
+        sensor: free_running_times(duration, profile.radar_rate_hz, CLOCK_JITTER_S["radar"], clocks)
+        for sensor in ego_model.RADARS
+    }
+    lidar_times = free_running_times(duration, profile.lidar_rate_hz, CLOCK_JITTER_S["lidar"], clocks)
+    camera_times = free_running_times(duration, profile.camera_rate_hz, CLOCK_JITTER_S["camera"], clocks)
     written = truth.tracklog_written
     writer.write_tracklog(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
     tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
     for sensor in ego_model.RADARS:
         rng = stream_rng(seed, scene_index, sensor)
-        for t in frame_times(duration, profile.radar_rate_hz):
+        for t in radar_times[sensor]:
             writer.append_radar(sensor, ns(t), simulate_cube(truth, profile, sensor, t, rng))
     sar_times = frame_times(duration, profile.sar_rate_hz)
     for sensor in ego_model.RADARS:
@@ -231,7 +258,7 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
             writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64))
     rng = stream_rng(seed, scene_index, "lidar")
     returns_per_sweep = {}
-    for t in frame_times(duration, profile.lidar_rate_hz):
+    for t in lidar_times:
         rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(t))
         boxes = truth.world.boxes_at(t)
         points, hit = lidar_sweep(rng, rotation, position, boxes, profile.lidar_azimuth_step_deg)
@@ -240,7 +267,7 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
         returns_per_sweep[float(t)] = np.bincount(tracks[tracks > 0], minlength=len(truth.world.cars) + 1)
     k, distortion = ego_model.camera_intrinsics(profile)
     rays = camera_model.pixel_rays(k, distortion, *profile.camera_shape)
-    for t in frame_times(duration, profile.camera_rate_hz):
+    for t in camera_times:
         rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.CAMERA, np.array(t))
         writer.append_camera(ego_model.CAMERA, ns(t), camera_model.render(rays, rotation, position, truth.world.boxes_at(t)))
     labels = label_rows(truth.world, truth.ego, sar_times, returns_per_sweep, [ns(t) for t in sar_times])
