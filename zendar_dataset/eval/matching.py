@@ -218,7 +218,9 @@ def match_and_band(
         prediction counts in band b: at its ground truth's range when matched, else at its own.
     """
     if len(band_low_m) > 8 or len(band_low_m) != len(band_high_m):
-        raise ValueError(f"need as many band lows as highs, at most 8, got {len(band_low_m)}, {len(band_high_m)}")
+        raise ValueError(
+            f"need as many band lows as highs, at most 8, got {len(band_low_m)} and {len(band_high_m)}"
+        )
     return _match_and_band_kernel(
         np.ascontiguousarray(pred_x_m, dtype=np.float64),
         np.ascontiguousarray(pred_y_m, dtype=np.float64),
