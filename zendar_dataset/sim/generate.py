@@ -22,6 +22,7 @@ import pathlib
 import queue
 import shutil
 import signal
+from dataclasses import dataclass
 
 from tqdm import tqdm
 
@@ -200,14 +201,24 @@ def synthesize_dataset(
     return out
 
 
+@dataclass(frozen=True)
 class _SceneTask:
     """One scene to simulate and write (picklable, sent to a worker process)."""
 
-    def __init__(self, out: pathlib.Path, profile: SimProfile, seed: int, backend: str, index: int, withhold: bool) -> None:
-        self.out, self.profile, self.seed, self.backend = out, profile, seed, backend
-        self.index, self.withhold = index, withhold
-        self.scene_id = f"scene-{index:04d}"
-        self.gt_path = out / GROUND_TRUTH_DIR / f"{self.scene_id}.json"
+    out: pathlib.Path
+    profile: SimProfile
+    seed: int
+    backend: str
+    index: int
+    withhold: bool
+
+    @property
+    def scene_id(self) -> str:
+        return f"scene-{self.index:04d}"
+
+    @property
+    def gt_path(self) -> pathlib.Path:
+        return self.out / GROUND_TRUTH_DIR / f"{self.scene_id}.json"
 
     def is_complete(self, writer: DatasetWriter) -> bool:
         return writer.scene_path(self.scene_id).exists() and (not self.withhold or self.gt_path.exists())
