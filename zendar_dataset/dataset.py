@@ -464,6 +464,7 @@ def _batch_buffer(shape: tuple[int, ...], dtype: np.dtype, pool_slots: int = 0) 
     makes), so that sending it copies nothing in the worker."""
     torch_dtype = torch.from_numpy(np.zeros(0, dtype=dtype)).dtype
     if get_worker_info() is None:
+        # numpy asks for transparent huge pages for large arrays: cheaper fresh pages than torch.empty.
         return torch.from_numpy(np.empty(shape, dtype=dtype)).numpy()
     if pool_slots > 0:
         slot_array = shared_batches.worker_pool().buffer(shape, dtype, pool_slots)
