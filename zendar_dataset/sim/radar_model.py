@@ -67,10 +67,23 @@ class RangeResponse:
         nu = self.nu_min + np.arange(int(2 * (self.half_width_bins + 2) * self.oversample) + 1) / self.oversample
         k = np.arange(self.n)
         centered = (k - (self.n - 1) / 2.0)[:, None] * nu[None, :]
-        kernel = np.exp(2j * np.pi * centered / self.n)
-        self.table = self.window @ kernel
+        terms = self.window[:, None] * np.exp(2j * np.pi * centered / self.n)  # [N, T]
+        self.table = _exact_sum(terms)
         # d/dnu of the tabulated part, for first-order shifts of the tone.
-        self.table_rate = (self.window * (2j * np.pi * (k - (self.n - 1) / 2.0) / self.n)) @ kernel
+        self.table_rate = _exact_sum(terms * (2j * np.pi * (k - (self.n - 1) / 2.0) / self.n)[:, None])
+
+
+def _exact_sum(terms: np.ndarray) -> np.ndarray:
+    """Correctly rounded sums over axis 0 of complex ``terms [N, T]`` (``math.fsum`` per part), ``[T]`` complex128.
+
+    Not ``window @ kernel``: BLAS splits that sum between its threads, so the
+    tables (and every cube built from them) changed in the last bit with the
+    number of BLAS threads of the process; a correctly rounded sum depends on
+    nothing but the terms.
+    """
+    real = [math.fsum(column) for column in np.ascontiguousarray(terms.real.T).tolist()]
+    imag = [math.fsum(column) for column in np.ascontiguousarray(terms.imag.T).tolist()]
+    return np.array(real) + 1j * np.array(imag)
 
 
 @numba.njit(cache=True, inline="always")
