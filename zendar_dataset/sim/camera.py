@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from zendar_dataset.sim.raycast import GROUND, NOTHING, cast_rays
+from zendar_dataset.sim.rotate import dot, rotate
 from zendar_dataset.sim.world import BoxSet
 
 SUN_DIRECTION_ENU = np.array([0.4, -0.3, 0.87]) / np.linalg.norm([0.4, -0.3, 0.87])
@@ -54,9 +55,9 @@ def render(
 ) -> np.ndarray:
     """Render one frame ``[H, W, 3]`` uint8 RGB from the true camera pose."""
     height, width, _ = rays_camera.shape
-    directions = rays_camera.reshape(-1, 3) @ enu_r_camera.T
+    directions = rotate(enu_r_camera, rays_camera.reshape(-1, 3))
     distance, hit, normal = cast_rays(position_enu, directions, boxes, MAX_RANGE_M)
-    shade = 0.45 + 0.55 * np.clip(normal @ SUN_DIRECTION_ENU, 0.0, 1.0)
+    shade = 0.45 + 0.55 * np.clip(dot(normal, SUN_DIRECTION_ENU), 0.0, 1.0)
     rgb = np.empty((directions.shape[0], 3))
     on_box = hit >= 0
     rgb[on_box] = boxes.color[hit[on_box]] * shade[on_box, None]

@@ -22,6 +22,7 @@ from zendar_dataset.geometry.quaternion import matrix_to_quat_wxyz
 from zendar_dataset.geometry.se3 import SE3
 from zendar_dataset.radar.fmcw import FmcwParams
 from zendar_dataset.sim.profiles import SimProfile
+from zendar_dataset.sim.rotate import compose, rotate
 from zendar_dataset.sim.trajectory import Trajectory
 
 TRACKLOG_RATE_HZ = 100.0
@@ -134,7 +135,7 @@ def sensor_poses_enu(trajectory: Trajectory, sensor: str, t_s: np.ndarray) -> tu
     """True ``enu_T_sensor``: rotations ``[..., 3, 3]`` and positions ``[..., 3]``."""
     rotation, translation = enu_T_ego(trajectory, t_s)
     mount = EGO_T_SENSOR[sensor]
-    return rotation @ mount.rotation, translation + rotation @ mount.translation
+    return compose(rotation, mount.rotation), translation + rotate(rotation, mount.translation)
 
 
 def _gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, correlation_s: float, dt: float) -> np.ndarray:
@@ -175,7 +176,7 @@ def make_tracklogs(
     truth = Tracklog(
         start_ns + np.rint(t * 1e9).astype(np.int64),
         enu.enu_to_ecef(position),
-        matrix_to_quat_wxyz(ecef_r_enu @ rotation),
+        matrix_to_quat_wxyz(compose(ecef_r_enu, rotation)),
     )
     dt = 1.0 / TRACKLOG_RATE_HZ
     n = t.shape[0]
@@ -187,6 +188,6 @@ def make_tracklogs(
     noisy = Tracklog(
         truth.timestamp_ns,
         enu.enu_to_ecef(position + position_error),
-        matrix_to_quat_wxyz(ecef_r_enu @ perturb @ rotation),
+        matrix_to_quat_wxyz(compose(compose(ecef_r_enu, perturb), rotation)),
     )
     return truth, noisy

@@ -12,6 +12,7 @@ import numpy as np
 
 from zendar_dataset.format.schema import LABEL_FIELD_NAMES
 from zendar_dataset.sim import ego as ego_model
+from zendar_dataset.sim.rotate import unrotate
 from zendar_dataset.sim.world import World
 
 MIN_SPEED_MPS = 0.5
@@ -35,8 +36,8 @@ def label_rows(world: World, ego, times_s: np.ndarray, returns_per_sweep: dict[f
                 continue
             if counts is None or counts[car.track_id] < MIN_LIDAR_RETURNS:
                 continue
-            center_ego = rotation.T @ (car.trajectory.position_at(np.array(t)) - translation)
-            velocity_ego = rotation.T @ velocity
+            center_ego = unrotate(rotation, car.trajectory.position_at(np.array(t)) - translation)
+            velocity_ego = unrotate(rotation, velocity)
             yaw = float(np.angle(np.exp(1j * (float(car.trajectory.yaw_at(np.array(t))) - ego_yaw))))
             for name, value in (("timestamp_ns", stamp), ("x", center_ego[0]), ("y", center_ego[1]),
                                 ("length", car.size_m[0]), ("width", car.size_m[1]), ("yaw", yaw),

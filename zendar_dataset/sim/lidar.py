@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from zendar_dataset.sim.raycast import GROUND, NOTHING, cast_rays
+from zendar_dataset.sim.rotate import dot, rotate
 from zendar_dataset.sim.world import BoxSet
 
 N_BEAMS = 16
@@ -51,11 +52,11 @@ def lidar_sweep(
         ``[P]`` int64 box hit by each return (:data:`~zendar_dataset.sim.raycast.GROUND` for the ground).
     """
     directions_lidar = beam_directions(azimuth_step_deg)
-    distance, hit, normal = cast_rays(position_enu, directions_lidar @ enu_r_lidar.T, boxes, MAX_RANGE_M)
+    distance, hit, normal = cast_rays(position_enu, rotate(enu_r_lidar, directions_lidar), boxes, MAX_RANGE_M)
     keep = hit != NOTHING
     directions_lidar, distance, hit, normal = directions_lidar[keep], distance[keep], hit[keep], normal[keep]
     measured = distance + rng.normal(0.0, RANGE_NOISE_M, distance.shape)
-    incidence = np.abs(np.einsum("rk,rk->r", directions_lidar @ enu_r_lidar.T, normal))
+    incidence = np.abs(dot(rotate(enu_r_lidar, directions_lidar), normal))
     reflectivity = np.where(hit == GROUND, GROUND_REFLECTIVITY, BOX_REFLECTIVITY)
     intensity = np.clip(255.0 * reflectivity * incidence, 0.0, 255.0)
     points = np.concatenate([directions_lidar * measured[:, None], intensity[:, None]], axis=1)

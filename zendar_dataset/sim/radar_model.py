@@ -33,6 +33,7 @@ import scipy.fft
 
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import WindowSpec, window_values
+from zendar_dataset.sim.rotate import dot
 
 BOLTZMANN_J_PER_K = 1.380649e-23
 DEFAULT_HALF_WIDTH_BINS = 6
@@ -269,8 +270,8 @@ def synthesize_range_profiles(
     rx = np.linalg.norm(to_rx, axis=-1)
     tau = (tx + rx) / SPEED_OF_LIGHT_MPS  # [P, S]
     tau_rate = (
-        np.einsum("psk,psk->ps", positions, velocities) / np.maximum(tx, 1e-9)
-        + np.einsum("psk,psk->ps", to_rx, velocities) / np.maximum(rx, 1e-9)
+        dot(positions, velocities) / np.maximum(tx, 1e-9)
+        + dot(to_rx, velocities) / np.maximum(rx, 1e-9)
     ) / SPEED_OF_LIGHT_MPS
     bins, cycles = _tone_bins_and_cycles(params, tau, tau_rate)
     response = range_response(window_values(range_window, n_samples), half_width_bins)

@@ -28,6 +28,7 @@ import scipy.fft
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import window_values
 from zendar_dataset.sar.backprojection import backproject
+from zendar_dataset.sim.rotate import rotate
 from zendar_dataset.sar.grid import ImageGrid
 
 MIN_PULSES = 8
@@ -86,7 +87,7 @@ class SarGeometry:
     def grid_enu(self, enu_r_ego: np.ndarray, enu_t_ego: np.ndarray) -> ImageGrid:
         """The image grid in ENU for the ego pose ``(enu_r_ego [3, 3], enu_t_ego [3])``."""
         return ImageGrid.axis_aligned(
-            center=enu_r_ego @ self.center_ego + enu_t_ego,
+            center=rotate(enu_r_ego, self.center_ego) + enu_t_ego,
             u=enu_r_ego[:, 0],
             v=enu_r_ego[:, 1],
             pixel_m=self.pixel_m,

@@ -22,6 +22,7 @@ from zendar_dataset.sim.labels import label_rows
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
+from zendar_dataset.sim.rotate import compose, rotate, unrotate
 from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
@@ -111,11 +112,11 @@ def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_r
     moving_pos, _vel, moving, _ids = world.moving_scatterers(t_s)
     mid = m // 2
     # Cull at the middle time first: transforming every scatterer at every time is the cost.
-    static_mid = (static.position_m - position[mid]) @ rotation[mid]
+    static_mid = unrotate(rotation[mid], static.position_m - position[mid])
     reach = max_range_m + 1.0
     near = (static_mid[:, 0] > -1.0) & (np.linalg.norm(static_mid, axis=1) < reach)
     all_pos = np.concatenate([np.broadcast_to(static.position_m[near][:, None, :], (int(near.sum()), t_s.shape[0], 3)), moving_pos])
-    local = np.einsum("mji,smj->smi", rotation, all_pos - position[None])
+    local = unrotate(rotation, all_pos - position[None])
     rcs = np.concatenate([static.rcs_m2[near], moving.rcs_m2])
     swerling1 = np.concatenate([static.swerling1[near], moving.swerling1])
     phase = np.concatenate([static.phase_rad[near], moving.phase_rad])
@@ -169,7 +170,7 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     # Keep scatterers that can land in the image (plus the range sidelobes' reach).
     corners = np.array([[i, j] for i in (-0.5, 0.5) for j in (-0.5, 0.5)]) * np.array(profile.sar_shape) * profile.sar_pixel_m
     corner_ego = geometry.center_ego[None, :] + np.concatenate([corners, np.zeros((4, 1))], axis=1)
-    corner_sensor = (corner_ego - mount.translation) @ mount.rotation
+    corner_sensor = unrotate(mount.rotation, corner_ego - mount.translation)
     ranges = np.linalg.norm(corner_sensor, axis=1)
     r_lo, r_hi = 0.0, float(ranges.max()) + 3.0
     local, rcs, swerling1, phase, velocity = _scatterers_in_sensor(truth, sensor, t, r_hi, with_velocity=True)
@@ -177,7 +178,7 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     r_mid = np.linalg.norm(mid, axis=-1)
     keep = _visible(mid, params.max_range_m - SAR_HALF_WIDTH_BINS * params.range_bin_m) & (r_mid > r_lo) & (r_mid < r_hi)
     # Scatterers far outside the imaged square add only cross-range sidelobes to it.
-    mid_ego = mid @ mount.rotation.T + mount.translation
+    mid_ego = rotate(mount.rotation, mid) + mount.translation
     half_extent = 0.5 * np.array(profile.sar_shape) * profile.sar_pixel_m + SAR_MARGIN_M
     keep &= np.all(np.abs(mid_ego[:, :2] - geometry.center_ego[:2]) < half_extent, axis=1)
     fluctuation = _fluctuation(rng, swerling1, phase)[keep]
@@ -193,17 +194,17 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     stamps = truth.start_ns + np.rint(t * 1e9).astype(np.int64)
     imu_position, imu_attitude = tracklog.at(stamps)
     enu_r_ecef = truth.enu.ecef_R_enu.T
-    imu_r = enu_r_ecef @ quat_wxyz_to_matrix(imu_attitude)  # [P, 3, 3] IMU -> ENU
+    imu_r = compose(enu_r_ecef, quat_wxyz_to_matrix(imu_attitude))  # [P, 3, 3] IMU -> ENU
     imu_t = truth.enu.ecef_to_enu(imu_position)
     ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
-    ego_r = imu_r @ ego_from_imu.rotation.T
-    ego_t = imu_t - np.einsum("pij,j->pi", ego_r, ego_from_imu.translation)
-    phase_center_ego = mount.translation + mount.rotation @ (receiver / 2.0)
-    phase_centers = ego_t + np.einsum("pij,j->pi", ego_r, phase_center_ego)
+    ego_r = compose(imu_r, ego_from_imu.rotation.T)
+    ego_t = imu_t - rotate(ego_r, ego_from_imu.translation)
+    phase_center_ego = mount.translation + rotate(mount.rotation, receiver / 2.0)
+    phase_centers = ego_t + rotate(ego_r, phase_center_ego)
     center_stamp = truth.start_ns + int(round(t_center_s * 1e9))
     c_position, c_attitude = tracklog.at(center_stamp)
-    c_r = enu_r_ecef @ quat_wxyz_to_matrix(c_attitude[0]) @ ego_from_imu.rotation.T
-    c_t = truth.enu.ecef_to_enu(c_position[0]) - c_r @ ego_from_imu.translation
+    c_r = compose(compose(enu_r_ecef, quat_wxyz_to_matrix(c_attitude[0])), ego_from_imu.rotation.T)
+    c_t = truth.enu.ecef_to_enu(c_position[0]) - rotate(c_r, ego_from_imu.translation)
     # Keep the image plane level: only the yaw of the (noisy) ego pose orients it.
     yaw = np.arctan2(c_r[1, 0], c_r[0, 0])
     level = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from zendar_dataset.sim.rotate import rotate
 from zendar_dataset.sim.trajectory import Trajectory
 
 ROAD_STEP_M = 0.05
@@ -317,7 +318,7 @@ def build_static_world(rng: np.random.Generator, road: Road, s_start_m: float, s
                         body = car_scatterers(rng, size)
                         c, sn = np.cos(pyaw), np.sin(pyaw)
                         rot = np.array([[c, -sn, 0], [sn, c, 0], [0, 0, 1]])
-                        body.position_m = body.position_m @ rot.T + ppos
+                        body.position_m = rotate(rot, body.position_m) + ppos
                         scatterers.append(body)
                     along += rng.uniform(5.5, 8.0)
             # Poles and trees on the sidewalk.
