@@ -28,8 +28,8 @@ import scipy.fft
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS, FmcwParams
 from zendar_dataset.radar.range_doppler import window_values
 from zendar_dataset.sar.backprojection import backproject
-from zendar_dataset.sim.rotate import rotate
 from zendar_dataset.sar.grid import ImageGrid
+from zendar_dataset.sim.rotate import rotate
 
 MIN_PULSES = 8
 
