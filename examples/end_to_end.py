@@ -34,7 +34,6 @@ from zendar_dataset.cli.common import run_cli
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import format_table, prepare_out_dir, write_atomically, write_metrics
 from zendar_dataset.format import frame_id
-from zendar_dataset.geometry import LocalENU, PoseInterpolator
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.radar import FmcwParams, detect, detections_to_points, estimate_azimuth
 
@@ -44,19 +43,6 @@ CFAR_PFA = 1e-4
 MIN_RADIAL_SPEED_MPS = 1.5
 CLUSTER_EPS_M = 1.5  # about half a car length: one car's scatterers chain into one cluster
 VELOCITY_HALF_STEP_NS = 50_000_000  # central difference over +-50 ms of tracklog
-
-
-def scene_poses(ds: ZendarDataset, scene_id: str) -> EgoPoses:
-    """The scene's ego poses at any time, from its tracklog and the IMU calibration."""
-    reader = ds.scene_reader(scene_id)
-    tracklog = PoseInterpolator(
-        reader.timestamps("tracklog"),
-        reader.array("tracklog/position_ecef")[...],
-        reader.array("tracklog/attitude_wxyz")[...],
-    )
-    origin = reader.enu_origin
-    enu = LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"])
-    return EgoPoses(tracklog, ego_T_sensor(reader.calibration.sensors["imu"]), enu)
 
 
 def mount_velocity_ego(poses: EgoPoses, point_ego: np.ndarray, timestamp_ns: int) -> np.ndarray:
@@ -134,7 +120,7 @@ def run(root: str, split: str, out: Path) -> int:
         for b, frame in enumerate(batch["frame_id"]):
             scene_id = batch["scene_id"][b]
             if scene_id not in poses:
-                poses[scene_id] = scene_poses(ds, scene_id)
+                poses[scene_id] = ds.ego_poses(scene_id)
             sensors = ds.scene_reader(scene_id).calibration.sensors
             frame_ns = int(batch["timestamp_ns"][b])
             points, snrs = [], []

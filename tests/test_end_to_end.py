@@ -101,7 +101,7 @@ def test_mount_velocity_matches_the_tracklog_speed(run_output, example):
     ds = ZendarDataset(root, "test", streams=("tracklog",), reference="tracklog")
     scene_id = ds.scene_ids[0]
     reader = ds.scene_reader(scene_id)
-    poses = example.scene_poses(ds, scene_id)
+    poses = ds.ego_poses(scene_id)
     # Independent reference: speed from written tracklog positions 10 samples (0.1 s) apart.
     t_ns = reader.timestamps("tracklog")
     position_ecef = reader.array("tracklog/position_ecef")[...]

@@ -248,6 +248,16 @@ class ZendarDataset(Dataset):
         self.sync_table(scene_id)
         return self._readers[self.scene_ids.index(scene_id)]
 
+    def ego_poses(self, scene_id: str) -> EgoPoses:
+        """The scene's ego poses at any time within its tracklog.
+
+        Interpolates the tracklog (linear translation, Slerp rotation) and applies the IMU
+        calibration, e.g. ``ds.ego_poses(scene_id).enu_T_ego(timestamp_ns)``; built once per
+        process and cached.
+        """
+        self.sync_table(scene_id)
+        return self._poses(self.scene_ids.index(scene_id))
+
     def sync_report(self) -> pd.DataFrame:
         """Residuals and drops per scene and stream.
 

@@ -99,6 +99,11 @@ def test_poses_at_reference_time(dataset_root):
             np.abs(item["tracklog"]["attitude_wxyz"]), [np.sqrt(0.5), 0, np.sqrt(0.5), 0], atol=1e-12
         )
         assert ECEF_R_IMU.shape == (3, 3)
+        poses = ds.ego_poses(item["scene_id"])
+        np.testing.assert_allclose(poses.ecef_T_ego(t).as_matrix(), expected_ecef_T_ego, atol=1e-9)
+        np.testing.assert_allclose(poses.enu_T_ego(t).as_matrix(), expected_enu_T_ego, atol=1e-6)
+    with pytest.raises(ZendarFormatError, match="not in split"):
+        ds.ego_poses("no-such-scene")
     # The tracklog ends at 850 ms: the frame at 900 ms has no pose (never extrapolated).
     last = ds[9]
     assert last["ecef_T_ego"] is None and last["sync"]["tracklog"] is None
