@@ -2,9 +2,11 @@
 
 A worker that returns a *fresh* shared-memory tensor per batch is limited by the
 page faults of that fresh memory (torch allocates a new segment per batch), about
-1 GB/s per worker. Here each worker keeps a small pool of slots, each an anonymous
-``memfd`` mapped once: its pages are faulted once and then reused batch after batch,
-and nothing is left behind in ``/dev/shm`` (nor limited by its size) if a worker dies.
+1 GB/s per worker; copying each received batch into fresh memory in the main process
+costs about as much again. Here each worker keeps a small pool of slots, each an
+anonymous ``memfd`` mapped once, whose pages are faulted once and reused batch after
+batch, and the main process hands out the slot itself: nothing is copied, and nothing
+is left behind in ``/dev/shm`` (nor limited by its size) if a worker dies.
 
 Life of a slot::
 
@@ -12,17 +14,19 @@ Life of a slot::
     ------                                   ------------
     lease: flag = 1, read cubes into it
     collate: SlotTensor over the slot
-    pickle: (fd, shape, dtype) -- queue -->  unpickle: map the slot, copy it into a fresh
-                                             ordinary tensor, unmap, flag = 0 (pwrite)
+    pickle: (fd, shape, dtype) -- queue -->  unpickle: map the slot, return an ordinary
+                                             tensor over the mapping
+                                             ... the user works with the batch ...
+                                             last view of it dies: flag = 0, unmap
     lease again once flag == 0 and no
     array of the worker still views it
 
-The user only ever holds ordinary tensors (numpy-allocated, as with ``num_workers=0``),
-so no shared memory outlives the unpickling. The slot is unmapped before its flag is
-cleared, so no read of it can still be pending when the worker reuses it. A worker
-never waits for a slot: when all are busy (batches prefetched, or dropped with an
-abandoned iterator) the pool grows up to its bound, then the batch takes torch's
-ordinary path.
+The worker writes into a slot only while its flag says it is free, and the flag is
+cleared only when no tensor, view or numpy array of the main process refers to the
+mapping any more (CPython's reference counting releases the mapping deterministically),
+so a batch the user holds is never overwritten. A worker never waits for a slot: when
+all are busy (batches prefetched or held by the user, or dropped with an abandoned
+iterator) the pool grows up to its bound, then the batch takes torch's ordinary path.
 """
 
 from __future__ import annotations
@@ -207,23 +211,35 @@ def _reduce_slot_tensor(tensor: SlotTensor) -> tuple:
     return _rebuild_from_slot, (DupFd(slot.fd), nbytes, tuple(plain.shape), dtype)
 
 
+class _ReceivedSlot(mmap.mmap):
+    """The main process's mapping of a slot. When the last array over it dies, the slot
+    is handed back to its worker (flag cleared) and the descriptor closed; the mapping
+    itself is removed right after, by mmap's own deallocation."""
+
+    def __new__(cls, fd: int, length: int) -> "_ReceivedSlot":
+        mapping = super().__new__(cls, fd, length, flags=mmap.MAP_SHARED | MAP_POPULATE)
+        mapping.fd = fd
+        return mapping
+
+    def __del__(self) -> None:
+        # No array views the mapping any more (each holds a reference to it): the worker
+        # may reuse the slot; nothing reads it after this.
+        os.pwrite(self.fd, bytes([FREE]), 0)
+        os.close(self.fd)
+
+
 def _rebuild_from_slot(dup_fd: Any, nbytes: int, shape: tuple[int, ...], dtype: str) -> torch.Tensor:
-    """In the receiving process: copy the slot into an ordinary tensor, then free the slot."""
+    """In the receiving process: an ordinary tensor over the slot, which stays reserved
+    for this tensor (and its views) until they are all gone."""
     fd = dup_fd.detach()
     try:
-        # numpy's allocation, as with num_workers=0: it asks for transparent huge pages,
-        # which halves the cost of faulting in fresh memory (measured; torch.empty: 4 KiB pages).
-        out = np.empty(nbytes, dtype=np.uint8)
-        # Populated in one call: no page fault per 64 KiB of the source while copying.
-        with mmap.mmap(fd, HEADER_BYTES + nbytes, flags=mmap.MAP_SHARED | MAP_POPULATE, prot=mmap.PROT_READ) as source:
-            data = np.frombuffer(source, dtype=np.uint8, count=nbytes, offset=HEADER_BYTES)
-            np.copyto(out, data)
-            del data
-        # Unmapped first, so no read of the slot can still be pending when the worker sees it free.
-        os.pwrite(fd, bytes([FREE]), 0)
-    finally:
+        # Populated in one call: no page fault per 64 KiB while the batch is read.
+        mapping = _ReceivedSlot(fd, HEADER_BYTES + nbytes)
+    except BaseException:
         os.close(fd)
-    return torch.from_numpy(out).view(getattr(torch, dtype)).reshape(shape)
+        raise
+    data = np.frombuffer(mapping, dtype=np.uint8, count=nbytes, offset=HEADER_BYTES)
+    return torch.from_numpy(data).view(getattr(torch, dtype)).reshape(shape)
 
 
 ForkingPickler.register(SlotTensor, _reduce_slot_tensor)

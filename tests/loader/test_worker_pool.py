@@ -100,6 +100,19 @@ def test_abandoned_iterators_with_persistent_workers_then_full_epoch(zarr_root):
             assert_same(g, w, f"epoch {epoch} batch {k}")
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_held_batches_are_never_overwritten(zarr_root, workers):
+    # Received batches are the workers' slots: holding some while the loader goes on must
+    # keep their bytes (the workers take other slots, or torch's path at the bound).
+    ds = make_ds(zarr_root, worker_pool_slots=3)
+    want = reference_batches(ds, 2)
+    for _ in range(2):
+        held = list(loader(ds, workers, batch_size=2, collate_fn=ds.collate))
+        assert len(held) == len(want)
+        for k, (got, expected) in enumerate(zip(held, want)):
+            assert_same(got, expected, f"held batch {k}")
+
+
 def test_pool_growth_is_bounded_and_falls_back(zarr_root):
     # The worker holds its first 3 batches: with 2 slots it must fall back, not wait.
     ds = make_ds(zarr_root, worker_pool_slots=2)
@@ -204,7 +217,14 @@ def test_slot_lifecycle_views_sending_and_return(monkeypatch):
     assert type(received) is torch.Tensor and received.dtype == torch.complex64
     assert torch.equal(received, torch.full((2, 3), 7 - 1j))
     assert torch.equal(again, received)
-    # Receiving freed it.
+    # The received tensor is the slot: reserved while it or any view of it lives.
+    view = received[1].numpy()
+    del received
+    gc.collect()
+    assert pool.buffer((2, 3), np.complex64, max_slots=2) is None
+    np.testing.assert_array_equal(view, np.full(3, 7 - 1j, np.complex64))
+    del view
+    gc.collect()
     assert pool.buffer((2, 3), np.complex64, max_slots=2) is not None
 
 
