@@ -11,6 +11,7 @@ import pytest
 
 from zendar_dataset.cli.eval import main
 from zendar_dataset.eval import evaluate
+from zendar_dataset.eval.report import format_table
 
 ZENDAR_EVAL = shutil.which("zendar-eval")
 
@@ -181,6 +182,9 @@ def test_bootstrap_of_one_scene_is_the_point_estimate(files):
         else:
             assert interval["low"] == pytest.approx(metrics["ap"][band])
             assert interval["high"] == pytest.approx(metrics["ap"][band])
+    assert "one scene: resampling scenes cannot show scene-to-scene spread" in format_table(metrics)
+    several = evaluate(predictions, ground_truth, bootstrap=20)
+    assert "one scene" not in format_table(several)
 
 
 def test_plot_needs_out(files):

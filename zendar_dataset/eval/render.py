@@ -58,7 +58,9 @@ def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[
         axes.set_ylim(0.0, 1.02)
         axes.set_xlabel("recall")
         axes.set_ylabel("precision")
-        axes.set_title(f"{method} {band} [{low_m:g}, {high_m:g}) m: {title_ap}".strip())
+        # Method names can be long: on their own line, shortened to fit the figure's width.
+        method_line = method if len(method) <= 48 else method[:47] + "…"
+        axes.set_title(f"{method_line}\n{band} [{low_m:g}, {high_m:g}) m: {title_ap}".strip(), fontsize=10)
         axes.grid(alpha=0.3)
         buffer = io.BytesIO()
         figure.savefig(buffer, format="png")

@@ -66,6 +66,8 @@ def format_table(metrics: dict[str, Any]) -> str:
     if bootstrap:
         n = max(interval["n"] for interval in bootstrap.values())
         lines.append(f"95% CI: percentile bootstrap over up to {n} scene resamples per band")
+        if metrics["n_scenes"] < 2:
+            lines.append("   (one scene: resampling scenes cannot show scene-to-scene spread; the interval is a point)")
     return "\n".join(lines)
 
 
