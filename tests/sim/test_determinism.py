@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from zendar_dataset.radar.range_doppler import window_values
 from zendar_dataset.sim.ego import radar_params
@@ -17,6 +18,7 @@ from zendar_dataset.sim.rotate import compose, dot, rotate, unrotate
 _FINGERPRINT = """
 import hashlib
 import numpy as np
+import pytest
 from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.radar.range_doppler import window_values
 from zendar_dataset.sim import ego as ego_model, scene
@@ -112,3 +114,30 @@ def test_rotation_helpers_equal_the_matrix_products():
     np.testing.assert_allclose(compose(a, b), a @ b, atol=1e-14)
     np.testing.assert_allclose(rotate(b, v[0, 0]), b @ v[0, 0], atol=1e-14)
     np.testing.assert_allclose(dot(v, v[0]), (v * v[0]).sum(-1), atol=1e-14)
+
+
+_SYNTH_SAR_DIGEST = """
+import hashlib, sys
+import zarr
+from zendar_dataset.sim.generate import synthesize_dataset
+synthesize_dataset(sys.argv[1], "tiny", n_scenes=2, seed=0, progress=False, jobs=1)
+for scene in ("scene-0000", "scene-0001"):
+    group = zarr.open_group(f"{sys.argv[1]}/scenes/{scene}.zarr", mode="r")
+    for sensor in sorted(group["sar"].group_keys()):
+        print(hashlib.sha1(group[f"sar/{sensor}/image"][...].tobytes()).hexdigest())
+"""
+
+
+@pytest.mark.slow
+def test_compiled_kernels_give_the_same_bytes_fresh_or_from_the_cache(tmp_path):
+    # The first run compiles every numba kernel into an empty cache, the second loads them:
+    # the SAR images must not change (fastmath made a few pixels round differently).
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    digests = []
+    for run in ("fresh", "cached"):
+        done = subprocess.run([sys.executable, "-c", _SYNTH_SAR_DIGEST, str(tmp_path / run)], env=env,
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        digests.append(done.stdout.split())
+    assert len(digests[0]) == 4
+    assert digests[0] == digests[1]
