@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
+from zendar_dataset.cli.interrupt import EXIT_INTERRUPTED, interrupts_raise
 from zendar_dataset.errors import ZendarError
 
 EXIT_OK = 0
@@ -26,7 +27,8 @@ def run_cli(body: Callable[[], int | None]) -> int:
         The process exit status.
     """
     try:
-        status = body()
+        with interrupts_raise():
+            status = body()
     except ZendarError as exc:
         problems = getattr(exc, "problems", None) or [str(exc)]
         if len(problems) > 1:
@@ -41,5 +43,5 @@ def run_cli(body: Callable[[], int | None]) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     return EXIT_OK if status is None else int(status)

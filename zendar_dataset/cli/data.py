@@ -7,6 +7,11 @@ arguments and returning an exit status.
 
 from __future__ import annotations
 
+from zendar_dataset.cli.interrupt import exit_while_starting
+
+if __name__ == "__main__":  # python -m: Ctrl-C during the imports below exits 130 quietly
+    exit_while_starting()
+
 import argparse
 import sys
 

@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from zendar_dataset.sim.generate import synthesize_dataset
+    from zendar_dataset.sim.generate import synthesize_dataset, usable_cpus
 
     if args.scenes is not None and args.scenes < 1:
         raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
@@ -56,7 +56,7 @@ def _run(args: argparse.Namespace) -> int:
         backend=args.backend,
         progress=not args.quiet,
         withhold_test_labels=args.withhold_test_labels,
-        jobs=args.jobs,
+        jobs=usable_cpus() if args.jobs is None else args.jobs,
     )
     print(f"wrote {out}")
     return 0

@@ -10,18 +10,26 @@ Parallel: scenes are independent (each seeds its own random streams and is
 published by its own atomic rename), so ``jobs`` worker processes write one
 scene each at a time and the bytes do not depend on ``jobs``.  Workers are
 started with ``spawn``: numba's GNU OpenMP thread pool is not fork-safe.
+The API runs in this process unless asked for workers, because ``spawn``
+re-runs the caller's main script in each worker: a call at the top level of
+a script without an ``if __name__ == "__main__":`` guard is refused at once
+rather than started, and a worker that dies (at start-up or later) fails the
+run instead of being replaced.
 """
 
 from __future__ import annotations
 
-import itertools
+import ast
 import json
 import multiprocessing
+import numbers
 import os
 import pathlib
-import queue
 import shutil
 import signal
+import sys
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 from tqdm import tqdm
@@ -123,7 +131,7 @@ def synthesize_dataset(
     backend: str = "zarr",
     progress: bool = True,
     withhold_test_labels: bool = False,
-    jobs: int | None = None,
+    jobs: int = 1,
 ) -> pathlib.Path:
     """Write a synthetic dataset to ``out`` (or finish an interrupted one).
 
@@ -143,11 +151,13 @@ def synthesize_dataset(
     withhold_test_labels : bool
         Write test scenes without ``labels/moving_cars`` and put their ground
         truth in ``OUT/test_ground_truth.json`` (the ``export-gt`` layout).
-    jobs : int, optional
-        Worker processes, each writing one scene at a time. Default: the usable
-        CPUs (:func:`usable_cpus`); never more than the scenes left to write.
-        ``1`` simulates in this process. Each worker's numba and BLAS threads
-        are capped so that ``jobs * threads`` does not exceed the usable CPUs.
+    jobs : int
+        Worker processes, each writing one scene at a time; never more than the
+        scenes left to write. ``1`` (the default) simulates in this process;
+        :func:`usable_cpus` is the useful maximum. Each worker's numba and BLAS
+        threads are capped so that ``jobs * threads`` does not exceed the usable
+        CPUs. Workers are started with ``spawn``, which re-runs the main script:
+        from a script, call with ``jobs > 1`` under ``if __name__ == "__main__":``.
 
     Returns
     -------
@@ -157,11 +167,16 @@ def synthesize_dataset(
     Raises
     ------
     ZendarError
-        When ``out`` holds something else, or an argument is invalid.
+        When ``out`` holds something else, or an argument is invalid, or
+        ``jobs > 1`` is asked from the top level of an unguarded main script.
     SceneSynthesisError
-        When simulating a scene fails (the message names the scene and the cause).
-        No scene is started after it; the ones finished (also those in progress
-        in other workers) are kept and a re-run resumes.
+        When simulating a scene fails or its worker process dies (the message
+        names the scene and the cause). No scene is started after it; the ones
+        finished (also those in progress in other workers) are kept and a re-run
+        resumes.
+    KeyboardInterrupt
+        On Ctrl-C, also when it lands inside a compiled kernel; workers are
+        stopped and their temporary stores removed.
     """
     profile = get_profile(profile)
     n_scenes = profile.default_scenes if n_scenes is None else int(n_scenes)
@@ -169,8 +184,11 @@ def synthesize_dataset(
         raise ZendarError(f"the number of scenes must be at least 1, got {n_scenes}")
     if backend not in BACKEND_SUFFIX:
         raise ZendarError(f"backend must be one of {sorted(BACKEND_SUFFIX)}, got {backend!r}")
-    if jobs is not None and (not isinstance(jobs, int) or jobs < 1):
+    if isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 1:
         raise ZendarError(f"jobs must be a positive integer, got {jobs!r}")
+    jobs = int(jobs)
+    if jobs > 1:
+        _refuse_unguarded_main(jobs)
     splits = split_scene_ids(n_scenes, split_ratios)
     out = pathlib.Path(out)
     _prepare_output(out, _settings(profile, n_scenes, seed, split_ratios, backend, withhold_test_labels))
@@ -185,7 +203,7 @@ def synthesize_dataset(
     bar = tqdm(total=n_scenes, initial=n_scenes - len(todo), desc=f"synth {profile.name}", unit="scene", disable=not progress)
     with bar:
         cpus = usable_cpus()
-        n_jobs = min(cpus if jobs is None else jobs, len(todo))
+        n_jobs = min(jobs, len(todo))
         if n_jobs <= 1:
             for task in todo:
                 _run_task(task)
@@ -246,8 +264,72 @@ def _run_task(task: _SceneTask) -> str:
     except ZendarError as exc:
         raise ZendarError(f"{task.scene_id}: {exc}") from exc
     except Exception as exc:
+        if _caused_by_interrupt(exc):
+            # Ctrl-C inside a compiled kernel surfaces as a SystemError around the KeyboardInterrupt.
+            raise KeyboardInterrupt from exc
         raise SceneSynthesisError(task.scene_id, f"{type(exc).__name__}: {exc}") from exc
     return task.scene_id
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is in the cause or context chain of ``exc``."""
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return True
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return False
+
+
+def _refuse_unguarded_main(jobs: int) -> None:
+    """Refuse ``jobs > 1`` when called from the top level of an unguarded main script.
+
+    ``spawn`` workers re-run the main script (as ``__mp_main__``); without an
+    ``if __name__ == "__main__":`` guard each worker would call this function
+    again and die at start-up. Detected by finding the main script's
+    module-level frame on the stack and checking, in its syntax tree, whether
+    the executing statement sits under such a guard. Interactive sessions,
+    ``python -c`` and notebooks have no script to re-run and are not refused.
+    """
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    if main is None or path is None:
+        return
+    frame = sys._getframe(1)
+    while frame is not None and not (frame.f_globals is vars(main) and frame.f_code.co_name == "<module>"):
+        frame = frame.f_back
+    if frame is None:
+        return
+    try:
+        tree = ast.parse(pathlib.Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, SyntaxError, ValueError):
+        return  # no source to inspect; a worker that dies at start-up still fails the run
+    line = frame.f_lineno
+    for statement in tree.body:
+        if statement.lineno <= line <= (statement.end_lineno or statement.lineno):
+            if _is_main_guard(statement):
+                return
+            break
+    raise ZendarError(
+        f"synthesize_dataset(jobs={jobs}) was called at the top level of {path} (line {line}) without an "
+        "'if __name__ == \"__main__\":' guard; worker processes re-run that script and would start again. "
+        "Put the call under the guard, or use jobs=1 (the default, in this process)"
+    )
+
+
+def _is_main_guard(statement: ast.stmt) -> bool:
+    """Whether ``statement`` is ``if __name__ == "__main__":`` (either operand order)."""
+    if not isinstance(statement, ast.If) or not isinstance(statement.test, ast.Compare):
+        return False
+    test = statement.test
+    if len(test.ops) != 1 or not isinstance(test.ops[0], ast.Eq):
+        return False
+    operands = [test.left, test.comparators[0]]
+    names = [o for o in operands if isinstance(o, ast.Name) and o.id == "__name__"]
+    constants = [o for o in operands if isinstance(o, ast.Constant) and o.value == "__main__"]
+    return len(names) == 1 and len(constants) == 1
 
 
 def _init_worker(threads: int) -> None:
@@ -268,39 +350,59 @@ def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, thread
     """Run ``todo`` on ``jobs`` spawned processes, handing out one scene per free worker.
 
     After a scene fails no new one is started, the scenes in progress are
-    finished (kept for the re-run), and the first failure is raised. Ctrl-C
-    stops every worker at once; their hidden temporary stores are removed.
+    finished (kept for the re-run), and the first failure is raised. A worker
+    that dies fails the run (a ``ProcessPoolExecutor`` is broken by a dead
+    worker, where a ``multiprocessing.Pool`` would start replacements for
+    ever). Ctrl-C stops every worker at once; their hidden temporary stores are
+    removed.
     """
-    outcomes: queue.SimpleQueue = queue.SimpleQueue()
-    pool = multiprocessing.get_context("spawn").Pool(jobs, initializer=_init_worker, initargs=(threads,))
+    executor = ProcessPoolExecutor(
+        jobs, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker, initargs=(threads,)
+    )
     try:
         pending = iter(todo)
-        in_flight = 0
+        running: dict[Future, _SceneTask] = {}
         failure: BaseException | None = None
-        for task in itertools.islice(pending, jobs):
-            pool.apply_async(_run_task, (task,), callback=outcomes.put, error_callback=outcomes.put)
-            in_flight += 1
-        while in_flight:
-            outcome = outcomes.get()
-            in_flight -= 1
-            if isinstance(outcome, BaseException):
-                failure = failure or outcome
-            else:
+        for task in pending:
+            running[executor.submit(_run_task, task)] = task
+            if len(running) == jobs:
+                break
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                task = running.pop(future)
+                error = future.exception()
+                if isinstance(error, BrokenProcessPool):
+                    error = SceneSynthesisError(
+                        task.scene_id, "a worker process died (killed by a signal, out of memory, or failed at start-up)"
+                    )
+                if error is not None:
+                    failure = failure or error
+                    continue
                 bar.update()
-            task = next(pending, None) if failure is None else None
-            if task is not None:
-                pool.apply_async(_run_task, (task,), callback=outcomes.put, error_callback=outcomes.put)
-                in_flight += 1
-        pool.close()
+                task = next(pending, None) if failure is None else None
+                if task is not None:
+                    running[executor.submit(_run_task, task)] = task
+        executor.shutdown(wait=True)
     except BaseException:
         # Killed workers leave hidden temporary stores, never a scene at its final path.
-        pool.terminate()
-        pool.join()
+        _terminate(executor)
         _remove_interrupted(out)
         raise
-    pool.join()
     if failure is not None:
         raise failure
+
+
+def _terminate(executor: ProcessPoolExecutor) -> None:
+    """Stop ``executor``'s workers now, without waiting for their scenes."""
+    terminate_workers = getattr(executor, "terminate_workers", None)
+    if terminate_workers is not None:  # Python >= 3.14
+        terminate_workers()
+        return
+    # Before 3.14 the executor has no public way to stop running workers: use its process table.
+    for process in list((executor._processes or {}).values()):
+        process.terminate()
+    executor.shutdown(wait=True, cancel_futures=True)
 
 
 def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:

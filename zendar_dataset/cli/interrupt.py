@@ -1,0 +1,106 @@
+"""Ctrl-C for the command-line tools: exit status 130 and no traceback, whenever it lands.
+
+Two phases. While a tool starts (imports, argument parsing) nothing has been
+written, so SIGINT ends the process at once. While a command works, SIGINT
+raises ``KeyboardInterrupt`` so that cleanups run (workers stopped, temporary
+stores removed), and :func:`interrupts_raise` turns whatever the interrupt
+became on its way out into ``KeyboardInterrupt`` (inside a numba kernel it
+surfaces as a ``SystemError``). Both phases install their handler explicitly
+and unblock SIGINT, so a disposition inherited from the parent (ignored under
+``nohup`` or ``cmd &`` in a script, or blocked) does not swallow Ctrl-C.
+
+The console scripts start here (:func:`zendar_data`, :func:`zendar_eval`), so
+the start-up handler is in place before the heavy imports.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+EXIT_INTERRUPTED = 130
+
+_interrupted = False
+
+
+def _exit_at_once(signum: int, frame: object) -> None:
+    # Starting up: nothing written yet, nothing to clean.
+    os.write(2, b"interrupted\n")
+    os._exit(EXIT_INTERRUPTED)
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    global _interrupted
+    if _interrupted:
+        return  # a second Ctrl-C must not cut the cleanup of the first short
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+def _install(handler) -> object:
+    previous = signal.signal(signal.SIGINT, handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    return previous
+
+
+def exit_while_starting() -> None:
+    """Make Ctrl-C exit with status 130 at once (for the start-up of a command-line tool)."""
+    if threading.current_thread() is threading.main_thread():
+        _install(_exit_at_once)
+
+
+@contextmanager
+def interrupts_raise() -> Iterator[None]:
+    """Within the block Ctrl-C raises ``KeyboardInterrupt``, whatever it became on the way out.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        When SIGINT arrived in the block: in place of the exception the
+        interrupt turned into, or at the end of the block if it was swallowed.
+
+    The previous SIGINT handler is restored afterwards (a no-op outside the
+    main thread, where handlers cannot be installed).
+    """
+    global _interrupted
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _interrupted = False
+    previous = _install(_raise_interrupt)
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:
+        if _interrupted:
+            raise KeyboardInterrupt from exc
+        raise
+    else:
+        if _interrupted:
+            raise KeyboardInterrupt
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def zendar_data() -> int:
+    """Console script ``zendar-data``."""
+    exit_while_starting()
+    from zendar_dataset.cli.data import main
+
+    return main()
+
+
+def zendar_eval() -> int:
+    """Console script ``zendar-eval``."""
+    exit_while_starting()
+    from zendar_dataset.cli.eval import main
+
+    return main()
+
+
+__all__ = ["EXIT_INTERRUPTED", "exit_while_starting", "interrupts_raise", "zendar_data", "zendar_eval"]
