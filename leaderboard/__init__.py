@@ -1,0 +1,18 @@
+"""The Zendar leaderboard: submissions scored by the official evaluator against a hidden test split.
+
+Installed as ``zendar_leaderboard`` (the repository folder is ``leaderboard/``). Modules:
+
+- ``ground_truth`` — the hidden test split, its checksum and its public / private parts;
+- ``meta`` and ``submission`` — the submission rules (the evaluator's validator plus ``meta``);
+- ``scoring`` — per-part scores through ``zendar_dataset.eval.evaluate``, rounded for display;
+- ``store`` — SQLite (WAL) records of teams, submissions and scores;
+- ``worker`` and ``scheduler`` — the scorer process, its limits and the watchdog;
+- ``pages``, ``export`` and ``server`` — the HTML pages, the static export and the HTTP API;
+- ``client`` and ``cli`` — ``zendar-leaderboard``.
+
+See docs/leaderboard.md.
+"""
+
+from __future__ import annotations
+
+__all__: list[str] = []

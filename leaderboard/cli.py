@@ -1,0 +1,245 @@
+"""``zendar-leaderboard``: check, serve, add-team, submit, render, and the administrator's commands.
+
+Problems in a user's file or arguments exit 2 without a traceback; an environment failure (a port
+in use, a full disk, a server that cannot be reached) exits 1 naming the path or address and the OS
+error; Ctrl-C exits 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sqlite3
+import sys
+from pathlib import Path
+
+from zendar_dataset.cli.common import run_cli
+from zendar_dataset.errors import ZendarError
+
+EXIT_ENVIRONMENT = 1
+
+
+def _existing_store(db: str):
+    from zendar_leaderboard.store import Store
+
+    if not Path(db).is_file():
+        raise ZendarError(f"no leaderboard database at {db!r} (create one with add-team)")
+    return Store(db)
+
+
+def _check(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.ground_truth import load_test_split
+    from zendar_leaderboard.submission import check_submission
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise ZendarError(f"submission file {args.file!r} does not exist or is not a file")
+    size = path.stat().st_size
+    if size > args.max_bytes:
+        raise ZendarError(f"submission file {args.file!r} is {size:,} bytes, over the limit of {args.max_bytes:,} bytes")
+    frame_ids = None
+    if args.gt is not None:
+        frame_ids = list(load_test_split(args.gt, args.split).frames)
+    checked = check_submission(path.read_bytes(), frame_ids)
+    if not checked.ok:
+        raise _problems(args.file, checked.problems)
+    n_frames = len(checked.document["results"])
+    n_detections = sum(map(len, checked.document["results"].values()))
+    print(f"{args.file}: valid ({n_frames} frames, {n_detections} detections, method {checked.meta['method']!r})")
+    if frame_ids is None:
+        print("frames were not compared with the test split (give --gt to compare them)")
+    return 0
+
+
+def _problems(name: str, problems: list[str]) -> ZendarError:
+    error = ZendarError(f"{len(problems)} problems in {name!r}")
+    error.problems = problems
+    return error
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from zendar_dataset.eval.protocol import PROTOCOL_VERSION
+    from zendar_leaderboard.ground_truth import load_test_split
+    from zendar_leaderboard.scheduler import ScorerSettings, ScoringService
+    from zendar_leaderboard.server import LeaderboardHTTPServer, ServerSettings
+    from zendar_leaderboard.store import Store
+
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
+    test_split = load_test_split(args.gt, args.split)
+    db = Path(args.db)
+    if not db.parent.is_dir():
+        raise ZendarError(f"the folder of --db {args.db!r} does not exist")
+    store = Store(db)
+    recovered = store.recover(PROTOCOL_VERSION, test_split.sha256)
+    scoring = ScoringService(store, ScorerSettings(
+        gt=str(Path(args.gt).resolve()), split=test_split.split, db=str(db.resolve()), gt_sha256=test_split.sha256,
+        time_limit_s=args.time_limit_s, memory_mb=args.memory_mb, bootstrap=args.bootstrap, workers=args.workers,
+    ))
+    settings = ServerSettings(store, test_split, scoring, quota=args.quota, max_bytes=args.max_bytes)
+    try:
+        server = LeaderboardHTTPServer((args.host, args.port), settings)
+    except OSError as exc:
+        print(f"error: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_ENVIRONMENT
+    scoring.start()
+    host, port = server.server_address[:2]
+    print(
+        f"serving http://{host}:{port}/ — split {test_split.split or '(file)'}: {len(test_split.frames)} frames, "
+        f"public {len(test_split.public_frame_ids)}, private {len(test_split.private_frame_ids)}; "
+        f"labels sha256 {test_split.sha256[:12]}…; requeued {recovered['requeued']}, "
+        f"re-scoring {recovered['rescore']}",
+        flush=True,
+    )
+    # SIGTERM stops the server like Ctrl-C: the submission being scored goes back to the queue.
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt))
+    try:
+        server.serve_forever()
+    finally:
+        scoring.stop()
+        server.server_close()
+    return 0
+
+
+def _add_team(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.store import Store
+
+    if not Path(args.db).parent.is_dir():
+        raise ZendarError(f"the folder of --db {args.db!r} does not exist")
+    token = Store(args.db).add_team(args.name)
+    print(token)
+    print(f"team {args.name!r} registered; its token is shown only this once", file=sys.stderr)
+    return 0
+
+
+def _submit(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.client import ServerUnreachable, submit
+
+    try:
+        return submit(args.file, args.server, args.token, wait=not args.no_wait, timeout_s=args.timeout_s)
+    except ServerUnreachable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ENVIRONMENT
+
+
+def _render(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.export import render_site
+
+    written = render_site(_existing_store(args.db), args.out)
+    print(f"wrote {len(written)} files to {args.out} (open {Path(args.out) / 'index.html'})")
+    return 0
+
+
+def _admin(args: argparse.Namespace) -> int:
+    store = _existing_store(args.db)
+    if args.command == "close-round":
+        store.close_round()
+        print("round closed: the ranking now shows the private part; new submissions are refused")
+    elif args.command == "hide":
+        store.set_hidden(args.id, True)
+        print(f"submission {args.id} hidden from the ranking")
+    elif args.command == "unhide":
+        store.set_hidden(args.id, False)
+        print(f"submission {args.id} shown on the ranking again")
+    elif args.command == "delete":
+        store.delete(args.id)
+        print(f"submission {args.id} deleted with its score")
+    elif args.command == "list":
+        print(f"{'id':>5}  {'team':<20} {'method':<40} {'status':<8} hidden  error")
+        for row in store.submissions():
+            print(f"{row.id:>5}  {row.team[:20]:<20} {row.meta.get('method', '')[:40]:<40} {row.status:<8} "
+                  f"{'yes' if row.hidden else 'no':<7} {row.error or ''}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from zendar_leaderboard.submission import DEFAULT_MAX_BYTES
+
+    parser = argparse.ArgumentParser(
+        prog="zendar-leaderboard",
+        description="Submissions scored by the official evaluator against a hidden test split (docs/leaderboard.md).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("check", help="check a submission offline exactly as the server does")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--gt", default=None, help="ground truth (file or dataset root) to compare frame ids with")
+    p.add_argument("--split", default=None, help="split of a dataset root given as --gt")
+    p.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES, help=f"size limit (default {DEFAULT_MAX_BYTES:,})")
+    p.set_defaults(func=_check)
+
+    p = sub.add_parser("serve", help="run the leaderboard server")
+    p.add_argument("--gt", required=True, help="ground truth: an export-gt file or a dataset root (with --split)")
+    p.add_argument("--db", required=True, help="SQLite database (created if missing)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000, help="port (0: any free port, printed)")
+    p.add_argument("--split", default=None, help="split of a dataset root (default: test when labelled, else val)")
+    p.add_argument("--quota", type=int, default=3, help="scored submissions per team per rolling 30 days (default 3)")
+    p.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES, help=f"largest upload (default {DEFAULT_MAX_BYTES:,})")
+    p.add_argument("--time-limit-s", type=float, default=600.0, help="scoring time per submission (default 600)")
+    p.add_argument("--memory-mb", type=int, default=4096, help="address-space limit of the scorer (default 4096)")
+    p.add_argument("--bootstrap", type=int, default=200, help="scene resamples for the intervals (default 200)")
+    p.add_argument("--workers", type=int, default=1, help="scorer processes (default 1)")
+    p.add_argument("--verbose", action="store_true", help="log every request and score")
+    p.set_defaults(func=_serve)
+
+    p = sub.add_parser("add-team", help="register a team and print its token once")
+    p.add_argument("name", metavar="NAME")
+    p.add_argument("--db", required=True)
+    p.set_defaults(func=_add_team)
+
+    p = sub.add_parser("submit", help="upload a submission, wait for its score and print it")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--server", required=True, help="the leaderboard's URL, e.g. http://127.0.0.1:8000")
+    p.add_argument("--token", required=True, help="the team's token")
+    p.add_argument("--no-wait", action="store_true", help="return once queued")
+    p.add_argument("--timeout-s", type=float, default=3600.0, help="give up waiting after this long (default 3600)")
+    p.set_defaults(func=_submit)
+
+    p = sub.add_parser("render", help="write the static site: index.html, leaderboard.json, leaderboard.csv")
+    p.add_argument("--db", required=True)
+    p.add_argument("out", metavar="OUT")
+    p.set_defaults(func=_render)
+
+    for name, text in (("hide", "hide an entry from the ranking"), ("unhide", "show a hidden entry again"),
+                       ("delete", "delete a submission and its score")):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("id", type=int, metavar="ID")
+        p.add_argument("--db", required=True)
+        p.set_defaults(func=_admin)
+    p = sub.add_parser("close-round", help="show the private part's scores and stop taking submissions")
+    p.add_argument("--db", required=True)
+    p.set_defaults(func=_admin)
+    p = sub.add_parser("list", help="list every submission with its status")
+    p.add_argument("--db", required=True)
+    p.set_defaults(func=_admin)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    for name in ("quota", "max_bytes", "workers", "memory_mb"):
+        if getattr(args, name, 1) <= 0:
+            parser.error(f"--{name.replace('_', '-')} must be positive")
+    if getattr(args, "bootstrap", 0) < 0 or getattr(args, "time_limit_s", 1) <= 0:
+        parser.error("--bootstrap must be 0 or more and --time-limit-s positive")
+
+    def body() -> int:
+        try:
+            return args.func(args)
+        except OSError as exc:
+            if isinstance(exc, FileNotFoundError):
+                raise
+            where = exc.filename or getattr(args, "db", None) or ""
+            print(f"error: {where}: {exc.strerror or exc}", file=sys.stderr)
+            return EXIT_ENVIRONMENT
+        except sqlite3.Error as exc:  # a full disk, a read-only or corrupt database file
+            print(f"error: database {getattr(args, 'db', '')}: {exc}", file=sys.stderr)
+            return EXIT_ENVIRONMENT
+
+    return run_cli(body)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

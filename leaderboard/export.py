@@ -1,0 +1,67 @@
+"""Static export: ``index.html``, ``leaderboard.json``, ``leaderboard.csv`` and ``entry/ID.html``.
+
+The files need no server: styles and the sorting script are inside the pages, links are relative,
+so the folder works opened from disk or from any static host. Each file is written to a temporary
+name and renamed, and only these names are written inside OUT.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import orjson
+
+from zendar_dataset.errors import ZendarError
+from zendar_leaderboard import entries as entries_mod
+from zendar_leaderboard.pages import entry_page, ranking_page
+from zendar_leaderboard.server import entry_parts
+from zendar_leaderboard.store import Store
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(descriptor, "wb") as file:
+            file.write(data)
+            file.flush()
+            os.fsync(file.fileno())
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
+    """Write the static leaderboard into ``out`` (created if missing).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ZendarError(f"output {str(out)!r} exists and is not a folder")
+    (out / "entry").mkdir(parents=True, exist_ok=True)
+    board = entries_mod.leaderboard(store)
+    written = []
+    for entry in board["entries"]:
+        found = entry_parts(store, entry["id"])
+        if found is None:  # hidden or deleted since the ranking was read
+            continue
+        page = entry_page(*found, static=True, root="../")
+        path = out / "entry" / f"{entry['id']}.html"
+        _write_atomic(path, page.encode())
+        written.append(path)
+    files = {
+        "leaderboard.json": orjson.dumps(board, option=orjson.OPT_INDENT_2),
+        "leaderboard.csv": entries_mod.to_csv(board).encode(),
+        "index.html": ranking_page(board, entry_href=lambda i: f"entry/{i}.html", static=True).encode(),
+    }
+    for name, data in files.items():
+        _write_atomic(out / name, data)
+        written.append(out / name)
+    return written
