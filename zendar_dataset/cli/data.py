@@ -18,13 +18,14 @@ import sys
 from zendar_dataset.cli import (
     data_convert,
     data_export_gt,
+    data_import_release,
     data_info,
     data_synth,
     data_validate,
 )
 from zendar_dataset.cli.common import run_cli
 
-SUBCOMMANDS = (data_info, data_validate, data_convert, data_export_gt, data_synth)
+SUBCOMMANDS = (data_info, data_validate, data_convert, data_export_gt, data_synth, data_import_release)
 
 
 def build_parser() -> argparse.ArgumentParser:

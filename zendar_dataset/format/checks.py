@@ -18,6 +18,7 @@ from zendar_dataset.format.schema import (
     CALIBRATION_ATTR,
     CALIBRATION_GROUP,
     ENU_ORIGIN_KEYS,
+    EXTRA_SENSOR_GROUPS,
     LABELS,
     SENSOR_GROUPS,
     TIME_REFERENCE,
@@ -181,7 +182,7 @@ def check_scene_metadata(root: Any, scene: str, expected_scene_id: str | None = 
     problems: list[str] = []
     _check_attrs(root, scene, expected_scene_id, meta, problems)
     _check_calibration(root, scene, meta, problems)
-    for group in SENSOR_GROUPS:
+    for group in SENSOR_GROUPS + EXTRA_SENSOR_GROUPS:
         node = stores.get_node(root, group)
         if node is None:
             continue

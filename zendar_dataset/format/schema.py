@@ -29,6 +29,10 @@ CALIBRATION_GROUP = "calibration"
 CALIBRATION_ATTR = "calibration"
 
 SENSOR_GROUPS = ("radar", "sar", "camera", "lidar")
+# Optional per-sensor groups that hold no frames of their own (written by ``import-release``).
+DETECTIONS = "detections"
+CAMERA_INDEX = "camera_index"
+EXTRA_SENSOR_GROUPS = (DETECTIONS, CAMERA_INDEX)
 TRACKLOG = "tracklog"
 LABELS = "labels/moving_cars"
 
@@ -69,6 +73,18 @@ STREAM_ARRAYS: dict[str, tuple[ArraySpec, ...]] = {
     ),
     "camera": (TIMESTAMP, _spec("image", "uint8", "N", None, None, 3)),
     "lidar": (TIMESTAMP, _spec("points", "float32", "P", 4), _spec("offsets", "int64", "N+1")),
+    DETECTIONS: (
+        TIMESTAMP,
+        _spec("offsets", "int64", "N+1"),
+        _spec("range_m", "float32", "P"),
+        _spec("azimuth_rad", "float32", "P"),
+        _spec("elevation_rad", "float32", "P"),
+        _spec("range_velocity_mps", "float32", "P"),
+        _spec("magnitude", "float32", "P"),
+        _spec("snr", "float32", "P"),
+        _spec("position_ecef", "float64", "P", 3),
+    ),
+    CAMERA_INDEX: (TIMESTAMP, _spec("frame_index", "int64", "N")),
     TRACKLOG: (
         TIMESTAMP,
         _spec("position_ecef", "float64", "N", 3),

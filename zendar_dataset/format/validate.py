@@ -20,7 +20,7 @@ from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import stores
 from zendar_dataset.format.checks import check_scene_metadata
 from zendar_dataset.format.reader import _read_text, check_dataset_json
-from zendar_dataset.format.schema import DATASET_JSON, LABELS, TRACKLOG, stream_specs
+from zendar_dataset.format.schema import DATASET_JSON, DETECTIONS, LABELS, TRACKLOG, stream_specs
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 # Arrays stored one frame per chunk: (stream group, array name).
@@ -79,14 +79,15 @@ def _check_stream_data(root: Any, scene: str, stream: str, problems: list[str]) 
         data = _read_all(node, scene, path, problems)
         if data is not None:
             values[spec.name] = data
-            if data.dtype.kind == "f" and not np.all(np.isfinite(data)):
+            # Detections keep the release's NaN (a quantity not measured), as docs/format.md allows.
+            if data.dtype.kind == "f" and group != DETECTIONS and not np.all(np.isfinite(data)):
                 problems.append(f"{scene}: {path}: expected finite values, found {int(np.count_nonzero(~np.isfinite(data)))} NaN/inf")
     timestamps = values.get("timestamp_ns")
     if timestamps is not None:
         _check_increasing(timestamps, scene, f"{stream}/timestamp_ns", stream != LABELS, problems)
-    if group == "lidar" and "offsets" in values:
+    if group in ("lidar", DETECTIONS) and "offsets" in values:
         offsets = values["offsets"]
-        points = stores.get_node(root, f"{stream}/points")
+        points = stores.get_node(root, f"{stream}/{'points' if group == 'lidar' else 'range_m'}")
         total = int(points.shape[0]) if points is not None and stores.is_array(points) else None
         if offsets.size and (offsets[0] != 0 or (total is not None and offsets[-1] != total) or np.any(np.diff(offsets) < 0)):
             problems.append(

@@ -30,13 +30,16 @@ from zendar_dataset.format.schema import (
     BACKEND_SUFFIX,
     CALIBRATION_ATTR,
     CALIBRATION_GROUP,
+    CAMERA_INDEX,
     DATASET_JSON,
+    DETECTIONS,
     ENU_ORIGIN_KEYS,
     FORMAT_NAME,
     FORMAT_VERSION,
     LABEL_FIELDS,
     LABELS,
     SPLITS,
+    STREAM_ARRAYS,
     TIME_REFERENCE,
     TRACKLOG,
 )
@@ -375,6 +378,63 @@ class SceneWriter:
             if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
                 raise ZendarFormatError(f"{where}/{name}: expected finite values")
         self._labels = out
+
+    def write_detections(
+        self, sensor: str, timestamp_ns: Any, offsets: Any, columns: dict[str, np.ndarray]
+    ) -> None:
+        """Write a whole ``detections/<sensor>`` group (optional; docs/format.md).
+
+        ``timestamp_ns`` [N] int64 frame times; ``offsets`` [N + 1] int64 (frame n is rows
+        ``offsets[n]:offsets[n+1]``); ``columns`` holds every per-detection array of
+        ``schema.STREAM_ARRAYS["detections"]`` with ``offsets[-1]`` rows (NaN allowed: not measured).
+        """
+        stream = self._stream(DETECTIONS, sensor, None)
+        where = f"{self.scene_id}: {stream.path}"
+        timestamps = _as(timestamp_ns, "int64", (None,), f"{where}/timestamp_ns")
+        n = timestamps.shape[0]
+        offsets = _as(offsets, "int64", (n + 1,), f"{where}/offsets")
+        if offsets[0] != 0 or np.any(np.diff(offsets) < 0):
+            raise ZendarFormatError(f"{where}/offsets: expected non-decreasing offsets from 0, found {offsets[:4].tolist()}...")
+        if np.any(np.diff(timestamps) <= 0):
+            raise ZendarFormatError(f"{where}/timestamp_ns: expected strictly increasing timestamps")
+        specs = {spec.name: spec for spec in STREAM_ARRAYS[DETECTIONS]}
+        missing = sorted(set(specs) - {"timestamp_ns", "offsets"} - set(columns))
+        if missing:
+            raise ZendarFormatError(f"{where}: expected columns {sorted(specs)}, missing {missing}")
+        arrays = {"timestamp_ns": timestamps, "offsets": offsets}
+        for name, spec in specs.items():
+            if name not in arrays:
+                shape = (int(offsets[-1]), *spec.shape[1:])
+                arrays[name] = _as(columns[name], spec.dtype.name, shape, f"{where}/{name}")
+        stream.timestamps = timestamps.tolist()
+        for name, array in arrays.items():
+            if name != "timestamp_ns":
+                self._write_small(f"{stream.path}/{name}", array)
+
+    def write_camera_index(self, sensor: str, timestamp_ns: Any, frame_index: Any) -> None:
+        """Write a whole ``camera_index/<sensor>`` group: [N] int64 times and [N] int64 video frame numbers."""
+        stream = self._stream(CAMERA_INDEX, sensor, None)
+        where = f"{self.scene_id}: {stream.path}"
+        timestamps = _as(timestamp_ns, "int64", (None,), f"{where}/timestamp_ns")
+        if np.any(np.diff(timestamps) <= 0):
+            raise ZendarFormatError(f"{where}/timestamp_ns: expected strictly increasing timestamps")
+        index = _as(frame_index, "int64", (timestamps.shape[0],), f"{where}/frame_index")
+        stream.timestamps = timestamps.tolist()
+        self._write_small(f"{stream.path}/frame_index", index)
+
+    def write_extra_array(self, path: str, array: np.ndarray) -> None:
+        """Write an array that format v1 lists as optional inside an existing stream group
+        (e.g. ``lidar/<lidar>/position_ecef``; docs/format.md); written whole, checksummed."""
+        if self._closed:
+            raise RuntimeError(f"{self.scene_id}: the writer is closed")
+        self._write_small(path, np.ascontiguousarray(array))
+
+    def write_attrs(self, path: str, attrs: dict[str, Any]) -> None:
+        """Add JSON attributes to the scene root (``""``) or one of its groups (readers ignore unknown ones)."""
+        if self._closed:
+            raise RuntimeError(f"{self.scene_id}: the writer is closed")
+        root = self._store.root
+        stores.write_attrs(root.require_group(path) if path else root, attrs)
 
     def _write_small(self, path: str, array: np.ndarray) -> None:
         rows = max(1, min(array.shape[0], SMALL_CHUNK_ROWS))

@@ -1,0 +1,183 @@
+"""``zendar-data import-release``: a synthetic release tree -> a valid format-v1 dataset with the geometry intact."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from tests.release import encoder as enc
+from tests.release.fixture import COLS, ROWS, SERIALS, T0_S, build_release
+from zendar_dataset.format import open_dataset
+from zendar_dataset.format.validate import validate_dataset
+from zendar_dataset.geometry.frames import ecef_to_sar_pixel
+from zendar_dataset.release.records import gps_seconds_to_ns
+
+
+def run(*args, capsys) -> tuple[int, str, str]:
+    from zendar_dataset.cli.data import main
+
+    status = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def digest(root: pathlib.Path) -> str:
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*")):
+        h.update(str(path.relative_to(root)).encode())
+        if path.is_file():
+            h.update(path.read_bytes())
+            h.update(str(path.stat().st_mtime_ns).encode())
+    return h.hexdigest()
+
+
+@pytest.fixture(scope="module", params=["2020", "2021"])
+def imported(request, tmp_path_factory):
+    root = tmp_path_factory.mktemp(f"release{request.param}")
+    src = root / "release"
+    truth = build_release(src, request.param, gzip_lidar=request.param == "2021")
+    before = digest(src)
+    from zendar_dataset.cli.data import main
+
+    status = main(["import-release", str(src), str(root / "out"), "--split", "val"])
+    assert status == 0
+    assert digest(src) == before, "the release folder was modified"
+    return request.param, src, root / "out", truth
+
+
+def test_imported_dataset_validates_and_loads(imported, capsys):
+    _, _, out, _ = imported
+    assert validate_dataset(out) == []
+    status, stdout, _ = run("validate", out, capsys=capsys)
+    assert status == 0, stdout
+    from zendar_dataset import ZendarDataset
+
+    ds = ZendarDataset(out, split="val", streams=("radar", "sar", "tracklog", "lidar"), reference="sar")
+    assert len(ds) == 20
+    item = ds[3]
+    assert item["frame_id"].startswith("2020-02-03_2252_001/")
+    assert item["lidar"] is not None
+
+
+def test_streams_names_and_summary(imported):
+    generation, _, out, truth = imported
+    summary = json.loads((out / "release_import.json").read_text())
+    (scene,) = summary["scenes"]
+    kinds = {s["path"]: s["kind"] for s in scene["streams"]}
+    base = "2020-02-03_2252/001/"
+    assert kinds[base + "1739000J1Q_images.pbs"] == f"Image ({generation})"
+    assert kinds[base + "1739000J2R_points.pbs"] == f"TrackerState ({generation})"
+    assert kinds[base + "lidar/lidar_00/stream.pbs"] == "LidarPointsFrame (2020)"
+    framing = {s["path"]: s["framing"] for s in scene["streams"]}
+    assert framing[base + "lidar/lidar_00/stream.pbs"].startswith("no header" + (", gzip" if generation == "2021" else ""))
+    assert framing[base + "vn200.pbs"].startswith("8-byte header")
+    text = " | ".join(scene["assumptions"])
+    assert "serial 1739000J1Q -> 'left'" in text and "serial 1739000J2R -> 'right'" in text
+    assert "pixel (i, j) is flat element j*rows + i" in text
+    index = open_dataset(out)
+    reader = index.open_scene("2020-02-03_2252_001")
+    assert set(reader.sensors("sar")) == set(SERIALS.values())
+    assert reader.sensors("radar") == ["left"]
+
+
+def test_sar_pixels_land_at_origin_plus_i_di_plus_j_dj(imported):
+    generation, _, out, truth = imported
+    reader = open_dataset(out).open_scene("2020-02-03_2252_001")
+    for side, frames in truth.sar.items():
+        times = reader.array(f"sar/{side}/timestamp_ns")[:]
+        origin = reader.array(f"sar/{side}/origin_ecef")[:]
+        di, dj = reader.array(f"sar/{side}/di_ecef")[:], reader.array(f"sar/{side}/dj_ecef")[:]
+        images = reader.array(f"sar/{side}/image")
+        assert images.shape == (len(frames), ROWS, COLS)
+        for m, frame in enumerate(frames):
+            assert times[m] == gps_seconds_to_ns(frame.timestamp_s)
+            np.testing.assert_array_equal(origin[m], frame.origin_ecef)
+            i, j = frame.bright_ij
+            # The stored model puts the bright pixel exactly at the target's ECEF position.
+            np.testing.assert_allclose(origin[m] + i * di[m] + j * dj[m], frame.target_ecef, atol=1e-6)
+            image = np.abs(images[m])
+            assert np.unravel_index(np.argmax(image), image.shape) == (i, j)
+        attrs = reader.group_attrs(f"sar/{side}") if hasattr(reader, "group_attrs") else None
+        if attrs is not None:
+            assert attrs["magnitude_only"] is (generation == "2020")
+
+
+def _bright_pixel_at(reader, side, timestamp_ns, points_ecef):
+    times = reader.array(f"sar/{side}/timestamp_ns")[:]
+    m = int(np.searchsorted(times, timestamp_ns))
+    assert times[m] == timestamp_ns
+    i, j, distance = ecef_to_sar_pixel(
+        points_ecef, reader.array(f"sar/{side}/origin_ecef")[m], reader.array(f"sar/{side}/di_ecef")[m], reader.array(f"sar/{side}/dj_ecef")[m]
+    )
+    image = np.abs(reader.array(f"sar/{side}/image")[m])
+    return image[np.rint(i).astype(int), np.rint(j).astype(int)], image, distance
+
+
+def test_lidar_and_detection_ecef_positions_land_on_the_bright_pixel(imported):
+    _, _, out, truth = imported
+    reader = open_dataset(out).open_scene("2020-02-03_2252_001")
+    # Lidar: the first point of each sweep is the target seen by the left radar.
+    offsets = reader.array("lidar/lidar_00/offsets")[:]
+    position_ecef = reader.array("lidar/lidar_00/position_ecef")[:]
+    for m, frame in enumerate(truth.sar["left"]):
+        value, image, distance = _bright_pixel_at(reader, "left", gps_seconds_to_ns(frame.timestamp_s), position_ecef[offsets[m]])
+        assert value == image.max() and distance < 1e-6
+    # Detections: the first of each frame is that radar's target.
+    for side, frames in truth.sar.items():
+        d_offsets = reader.array(f"detections/{side}/offsets")[:]
+        d_ecef = reader.array(f"detections/{side}/position_ecef")[:]
+        d_times = reader.array(f"detections/{side}/timestamp_ns")[:]
+        assert d_offsets[-1] == truth.n_detections[side]
+        for m, frame in enumerate(frames):
+            assert d_times[m] == gps_seconds_to_ns(frame.timestamp_s)
+            value, image, _ = _bright_pixel_at(reader, side, d_times[m], d_ecef[d_offsets[m]])
+            assert value == image.max()
+        ranges = reader.array(f"detections/{side}/range_m")[:]
+        assert ranges[0] == np.float32(10.5) and np.isnan(ranges).sum() == 1  # the NaN detection is kept as NaN
+
+
+def test_tracklog_cubes_and_camera_index(imported):
+    _, _, out, truth = imported
+    reader = open_dataset(out).open_scene("2020-02-03_2252_001")
+    t = reader.array("tracklog/timestamp_ns")[:]
+    assert t.tolist() == [gps_seconds_to_ns(s) for s in truth.tracklog_s]
+    cube = reader.array("radar/left/cube")[2]
+    assert cube.shape == (16, 8, 4) and np.argwhere(np.abs(cube[..., 0]) > 0).tolist() == [[5, 5]]
+    assert reader.calibration.radar("left").range_bin_m == pytest.approx(0.176)
+    index = reader.array("camera_index/index/frame_index")[:]
+    assert index.tolist() == list(range(30))
+
+
+def test_rerun_resumes_without_touching_finished_scenes(imported, capsys):
+    _, src, out, _ = imported
+    before = digest(out / "scenes")
+    status, stdout, _ = run("import-release", src, out, "--split", "val", capsys=capsys)
+    assert status == 0 and "already imported" in stdout
+    assert digest(out / "scenes") == before
+
+
+def test_truncated_stream_exit_2_one_line_then_skip_corrupt(tmp_path, capsys):
+    src = tmp_path / "release"
+    build_release(src)
+    images = src / "2020-02-03_2252" / "001" / "1739000J1Q_images.pbs"
+    data = images.read_bytes()
+    images.write_bytes(data[:-100])
+    status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 2
+    assert "1739000J1Q_images.pbs: byte offset" in err and "only" in err and "Traceback" not in err
+    assert not (tmp_path / "out" / "scenes" / "2020-02-03_2252_001.zarr").exists()
+    status, stdout, _ = run("import-release", src, tmp_path / "out", "--skip-corrupt", capsys=capsys)
+    assert status == 0 and "lost" in stdout
+    assert validate_dataset(tmp_path / "out") == []
+
+
+def test_output_inside_source_is_refused(tmp_path, capsys):
+    src = tmp_path / "release"
+    enc.write_stream(src / "vn200.pbs", [enc.position_record(T0_S, (1, 0, 0, 0), (6.4e6, 0, 0), 0)])
+    status, _, err = run("import-release", src, src / "out", capsys=capsys)
+    assert status == 2 and "outside the release folder" in err
+    assert sorted(p.name for p in src.iterdir()) == ["vn200.pbs"]

@@ -1,0 +1,656 @@
+"""Converting release folders into format-v1 scenes (``zendar-data import-release``).
+
+Each scene of the release (``release/discover.py``) becomes one scene store
+written through :class:`zendar_dataset.format.writer.DatasetWriter`: atomic
+(a scene appears only when complete), resumable (complete scenes are kept and
+skipped), and the source is only read.  Everything the release does not say
+and the importer had to decide is recorded as an assumption: in the summary,
+and in the scene's root attribute ``release_import``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import re
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from zendar_dataset.errors import ZendarError, ZendarFormatError
+from zendar_dataset.format.schema import DATASET_JSON, SPLITS
+from zendar_dataset.format.writer import DatasetWriter, write_json_atomic
+from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
+from zendar_dataset.geometry.geodesy import LocalENU
+from zendar_dataset.release import records as rec
+from zendar_dataset.release.discover import SceneSource, find_scenes
+from zendar_dataset.release.messages import RD_MODEL
+from zendar_dataset.release.stream import ReleaseStream
+from zendar_dataset.release.wire import WireError, decode
+
+SPEED_OF_LIGHT_MPS = 299_792_458.0
+SUMMARY_JSON = "release_import.json"
+# Radar numbers used only when a radar has no RangeDopplerImageModel (format v1 requires them).
+PAPER_CENTER_FREQUENCY_HZ = 77e9
+PAPER_RANGE_BIN_M = 0.176
+PLACEHOLDER_DOPPLER_BIN_MPS = 0.1
+# IMU frame (forward, right, down) -> ego frame (forward, left, up): 180 degrees about x.
+EGO_Q_IMU_WXYZ = (0.0, 1.0, 0.0, 0.0)
+# A radar looking to the ego's left (+y) or right (-y): its boresight x turned by +-90 degrees about z.
+SIDE_Q_WXYZ = {"left": (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)), "right": (np.sqrt(0.5), 0.0, 0.0, -np.sqrt(0.5))}
+_SIDE_WORD = re.compile(r"(?:^|[_\W])(left|right)(?:$|[_\W])", re.IGNORECASE)
+
+
+@dataclass
+class StreamSummary:
+    """What happened to one stream file."""
+
+    path: str
+    kind: str | None = None
+    framing: str | None = None
+    records: int = 0
+    empty_records: int = 0
+    written_to: str | None = None
+    skipped: list[str] = field(default_factory=list)
+    lost_bytes: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class SceneSummary:
+    """One scene: where it went, its streams and the assumptions made."""
+
+    scene_id: str
+    source: str
+    status: str = "imported"  # or "already imported"
+    streams: list[StreamSummary] = field(default_factory=list)
+    assumptions: list[str] = field(default_factory=list)
+
+
+@dataclass
+class ImportSummary:
+    """The whole import, printable with :meth:`lines` and saved as ``release_import.json``."""
+
+    source: str
+    out: str
+    scenes: list[SceneSummary] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        out = []
+        n_streams = sum(len(s.streams) for s in self.scenes)
+        n_records = sum(st.records for s in self.scenes for st in s.streams)
+        out.append(f"{self.source}: {len(self.scenes)} scenes, {n_streams} streams, {n_records} records read -> {self.out}")
+        for scene in self.scenes:
+            out.append(f"scene {scene.scene_id} ({scene.status}) from {scene.source}")
+            for st in scene.streams:
+                target = f" -> {st.written_to}" if st.written_to else ""
+                out.append(f"  {st.path}: {st.kind or '?'}, {st.records} records{target}; framing {st.framing}")
+                for note in st.notes:
+                    out.append(f"    kind: {note}")
+                if st.empty_records:
+                    out.append(f"    {st.empty_records} empty records (length 0) skipped")
+                if st.lost_bytes:
+                    out.append(f"    lost {st.lost_bytes} bytes to --skip-corrupt")
+                for reason in st.skipped:
+                    out.append(f"    skipped: {reason}")
+            for assumption in scene.assumptions:
+                out.append(f"  assumed: {assumption}")
+        return out
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class _Opened:
+    path: pathlib.Path
+    stream: ReleaseStream | None
+    summary: StreamSummary
+    model: rec.RangeDopplerModel | None = None  # for single-message .pb model files
+
+
+def _prefix(path: pathlib.Path, suffix: str) -> str | None:
+    name = path.name.split(".")[0]
+    return name[: -len(suffix)] if name.endswith(suffix) and len(name) > len(suffix) else None
+
+
+def _open(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> _Opened:
+    summary = StreamSummary(str(path.relative_to(src)) if path != src else path.name)
+    if path.name.lower().endswith(".pb"):
+        data = memoryview(path.read_bytes())
+        try:
+            model = rec.rd_model(decode(RD_MODEL, data))
+        except (WireError, KeyError) as exc:
+            summary.skipped.append(f"single-message file that is not a RangeDopplerImageModel ({exc})")
+            return _Opened(path, None, summary)
+        summary.kind, summary.framing, summary.records = "RangeDopplerImageModel (2020)", "one message, no prefix", 1
+        return _Opened(path, None, summary, model)
+    try:
+        stream = ReleaseStream(path, skip_corrupt=skip_corrupt)
+    except ZendarFormatError as exc:
+        problems.extend(exc.problems)
+        return _Opened(path, None, summary)
+    summary.kind, summary.framing, summary.notes = stream.kind.label, stream.framing.describe(), list(stream.notes)
+    if not stream.kind.converted:
+        summary.skipped.append(f"{stream.kind.label}: raw acquisition packets are not converted (no decoded product)")
+    return _Opened(path, stream, summary)
+
+
+def _finish(opened: _Opened) -> None:
+    if opened.stream is not None:
+        opened.summary.empty_records = opened.stream.empty_records
+        opened.summary.lost_bytes = sum(loss.size_bytes for loss in opened.stream.losses)
+        opened.summary.skipped.extend(f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses)
+
+
+def _iter(opened: _Opened, count: bool = True):
+    """Raw records ``(offset, buf, start, end)`` of a stream, counted in its summary unless ``count`` is False."""
+    for item in opened.stream.records():
+        opened.summary.records += count
+        yield item
+
+
+def _decoded(opened: _Opened, count: bool = True):
+    """Decoded records ``(offset, dict)``; one that does not decode is skipped (``skip_corrupt``) or raises."""
+    for offset, buf, start, end in _iter(opened, count):
+        try:
+            yield offset, decode(opened.stream.kind.message, buf, start, end)
+        except WireError as exc:
+            opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+
+
+class _Stamps:
+    """Strictly increasing int64 ns per output stream; records out of order are skipped with a reason."""
+
+    def __init__(self, summary: StreamSummary) -> None:
+        self.last: int | None = None
+        self.summary = summary
+        self.dropped: dict[str, int] = {}
+
+    def take(self, seconds: float) -> int | None:
+        if not np.isfinite(seconds) or seconds < 0:
+            self.dropped["non-finite or negative timestamp"] = self.dropped.get("non-finite or negative timestamp", 0) + 1
+            return None
+        ns = rec.gps_seconds_to_ns(seconds)
+        if self.last is not None and ns <= self.last:
+            self.dropped["timestamp not after the previous record's"] = self.dropped.get("timestamp not after the previous record's", 0) + 1
+            return None
+        self.last = ns
+        return ns
+
+    def report(self) -> None:
+        self.summary.skipped.extend(f"{n} records: {why}" for why, n in self.dropped.items())
+
+
+def _tracklog(opened: list[_Opened], scene: SceneSummary):
+    if not opened:
+        return None
+    first, *rest = opened
+    for other in rest:
+        other.summary.skipped.append(f"a second tracklog; {first.summary.path} is the scene's tracklog")
+    stamps = _Stamps(first.summary)
+    t, p, q = [], [], []
+    bad = 0
+    for _, record in _decoded(first):
+        pose = rec.pose(record)
+        if not (np.all(np.isfinite(pose.position_ecef)) and np.all(np.isfinite(pose.attitude_wxyz))) or not np.linalg.norm(pose.attitude_wxyz) > 0:
+            bad += 1
+            continue
+        ns = stamps.take(pose.timestamp_s)
+        if ns is None:
+            continue
+        t.append(ns)
+        p.append(pose.position_ecef)
+        q.append(pose.attitude_wxyz / np.linalg.norm(pose.attitude_wxyz))
+    stamps.report()
+    if bad:
+        first.summary.skipped.append(f"{bad} records with NaN position or attitude")
+    if not t:
+        first.summary.skipped.append("no usable pose")
+        return None
+    first.summary.written_to = "tracklog"
+    scene.assumptions.append("Position.attitude rotates IMU (forward, right, down) vectors into ECEF; quaternions normalised")
+    return np.asarray(t, np.int64), np.asarray(p), np.asarray(q)
+
+
+def _infer_sides(images: dict[str, _Opened], scene: SceneSummary) -> dict[str, str]:
+    """Serial -> "left"/"right" from where each radar's images lie relative to the vehicle.
+
+    The image centre, moved into the vehicle (IMU: forward, right, down) frame with the
+    image's own pose, has y > 0 on the right.  Named sides are used only when exactly one
+    serial falls on each side.
+    """
+    sides: dict[str, str] = {}
+    evidence = {}
+    for serial, opened in images.items():
+        right = []
+        for _, record in _decoded(opened, count=False):
+            frame = rec.sar_frame(opened.stream.kind, record)
+            centre = frame.origin_ecef + frame.rows / 2 * frame.di_ecef + frame.cols / 2 * frame.dj_ecef
+            q = frame.attitude_wxyz
+            if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(q)) and np.all(np.isfinite(frame.position_ecef))):
+                continue
+            offset_imu = quat_wxyz_to_matrix(q / np.linalg.norm(q)).T @ (centre - frame.position_ecef)
+            right.append(offset_imu[1])
+            if len(right) >= 20:
+                break
+        if right:
+            lateral = float(np.median(right))
+            sides[serial] = "right" if lateral > 0 else "left"
+            evidence[serial] = lateral
+    named = sorted(sides.values())
+    if len(sides) != len(images) or len(set(named)) != len(named):
+        scene.assumptions.append(
+            f"serial -> side: not inferable (lateral image offsets {evidence}); radars keep their serials as names"
+        )
+        return {}
+    for serial, side in sorted(sides.items()):
+        scene.assumptions.append(
+            f"serial {serial} -> {side!r}: inferred from its SAR images lying {abs(evidence[serial]):.1f} m to the "
+            f"{side} of the vehicle (median over the first frames); not stated by the release"
+        )
+    return sides
+
+
+def _enu_origin(tracklog, images: dict[str, _Opened], scene: SceneSummary) -> dict:
+    anchor = None
+    if tracklog is not None:
+        anchor, what = tracklog[1][0], "the first tracklog position"
+    else:
+        for opened in images.values():
+            for _, record in _decoded(opened, count=False):
+                frame = rec.sar_frame(opened.stream.kind, record)
+                if np.all(np.isfinite(frame.origin_ecef)):
+                    anchor, what = frame.origin_ecef, "the first SAR image origin"
+                    break
+            if anchor is not None:
+                break
+    if anchor is None:
+        scene.assumptions.append("enu_origin: nothing geolocated in the scene; (0, 0, 0) used")
+        return {"lat_deg": 0.0, "lon_deg": 0.0, "height_m": 0.0}
+    lat, lon, height = (float(np.asarray(v).reshape(-1)[0]) for v in ecef_to_geodetic(np.asarray(anchor).reshape(1, 3)))
+    scene.assumptions.append(f"enu_origin: {what}")
+    return {"lat_deg": lat, "lon_deg": lon, "height_m": height}
+
+
+def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSummary) -> dict:
+    side = name if name in SIDE_Q_WXYZ else None
+    rotation = list(SIDE_Q_WXYZ[side]) if side else [1.0, 0.0, 0.0, 0.0]
+    scene.assumptions.append(
+        f"radar {name!r} pose in the ego frame: "
+        + (f"looking to the {side} (boresight along ego {'+' if side == 'left' else '-'}y)" if side else "identity")
+        + " at the ego origin; the release ships no extrinsics the importer could read"
+    )
+    if model is None:
+        scene.assumptions.append(
+            f"radar {name!r}: no RangeDopplerImageModel, so calibration numbers are placeholders format v1 requires: "
+            f"{PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz and {PAPER_RANGE_BIN_M} m range bins (paper), "
+            f"{PLACEHOLDER_DOPPLER_BIN_MPS} m/s Doppler bins and one antenna at the origin (unknown)"
+        )
+        range_bin = PAPER_RANGE_BIN_M
+        return {
+            "rotation_wxyz": rotation,
+            "translation_m": [0.0, 0.0, 0.0],
+            "center_frequency_hz": PAPER_CENTER_FREQUENCY_HZ,
+            "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * range_bin),
+            "range_bin_m": range_bin,
+            "doppler_bin_mps": PLACEHOLDER_DOPPLER_BIN_MPS,
+            "rx_positions_m": [[0.0, 0.0, 0.0]],
+        }
+    # The release's radar frame is x left, y up, z forward; format v1's is x forward, y left, z up.
+    rx = model.rx_positions_m[:, [2, 0, 1]] if model.rx_positions_m.size else np.zeros((model.num_rx, 3))
+    scene.assumptions.append(
+        f"radar {name!r}: receiver positions taken in the release's radar frame (x left, y up, z forward) and "
+        f"reordered to format v1's (x boresight, y left, z up); bandwidth = c / (2 * range bin)"
+    )
+    return {
+        "rotation_wxyz": rotation,
+        "translation_m": [0.0, 0.0, 0.0],
+        "center_frequency_hz": SPEED_OF_LIGHT_MPS / model.wavelength_m,
+        "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * model.range_axis[1]),
+        "range_bin_m": model.range_axis[1],
+        "doppler_bin_mps": abs(model.doppler_axis[1]),
+        "rx_positions_m": rx.tolist(),
+    }
+
+
+def _doppler_shift(model: rec.RangeDopplerModel) -> tuple[str | None, str]:
+    """How to bring the Doppler axis to format v1's (zero velocity at bin D/2): ``"none"``, ``"fftshift"`` or None."""
+    start, delta, count = model.doppler_axis
+    r_start, r_delta, _ = model.range_axis
+    if not (r_delta > 0 and abs(r_start) <= 1e-6 * r_delta):
+        return None, f"range axis starts at {r_start} m with {r_delta} m bins; format v1 needs bin 0 at 0 m"
+    if not delta > 0:
+        return None, f"Doppler axis step {delta} is not positive"
+    if abs(start + (count // 2) * delta) <= 1e-6 * delta:
+        return "none", "Doppler axis centred (zero velocity at bin D/2), as format v1"
+    if abs(start) <= 1e-6 * delta:
+        return "fftshift", "Doppler axis starts at 0 m/s: taken as FFT order and fftshifted to put zero at bin D/2"
+    return None, f"Doppler axis starts at {start} m/s with {delta} m/s bins, neither centred nor FFT order"
+
+
+class _SceneImport:
+    """Everything about importing one scene; :meth:`run` writes it."""
+
+    def __init__(self, source: SceneSource, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> None:
+        self.source = source
+        self.summary = SceneSummary(source.scene_id, str(source.folder))
+        self.opened = [_open(path, src, skip_corrupt, problems) for path in source.files]
+        self.summary.streams = [o.summary for o in self.opened]
+
+    def _by_kind(self, name: str) -> list[_Opened]:
+        return [o for o in self.opened if o.stream is not None and o.stream.kind.name == name and o.stream.kind.converted]
+
+    def run(self, writer: DatasetWriter) -> None:
+        scene = self.summary
+        tracklog = _tracklog(self._by_kind("Position"), scene)
+        images = self._keyed(self._by_kind("Image"), "_images")
+        points = self._keyed(self._by_kind("TrackerState"), "_points")
+        rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
+        sides = _infer_sides(images, scene)
+        rename = lambda serial: sides.get(serial, serial)  # noqa: E731
+        models = self._models(list(rd_frames))
+        radars = sorted({rename(s) for s in images} | {rename(s) for s in points} | set(rd_frames))
+        calibration = {"imu": {"rotation_wxyz": list(EGO_Q_IMU_WXYZ), "translation_m": [0.0, 0.0, 0.0]}}
+        scene.assumptions.append("IMU at the ego origin, axes forward-right-down (ego_T_imu: 180 degrees about x)")
+        for radar in radars:
+            calibration[radar] = _radar_entry(radar, models.get(radar), scene)
+        lidars = self._keyed(self._by_kind("LidarPointsFrame"), "")
+        cameras = self._keyed(self._by_kind("CameraIndexRecord"), "")
+        for name in list(lidars) + list(cameras):
+            calibration[name] = {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
+            scene.assumptions.append(f"sensor {name!r} pose in the ego frame: identity (no extrinsics in the release)")
+        enu_origin = _enu_origin(tracklog, images, scene)
+        enu = LocalENU(**enu_origin)
+        with writer.scene(self.source.scene_id, enu_origin=enu_origin, calibration={"sensors": calibration}) as out:
+            if tracklog is not None:
+                out.write_tracklog(*tracklog)
+            for serial, opened in images.items():
+                self._write_sar(out, rename(serial), serial, opened)
+            for name, opened in rd_frames.items():
+                self._write_cubes(out, name, opened, models.get(name))
+            for serial, opened in points.items():
+                self._write_detections(out, rename(serial), opened)
+            for name, opened in lidars.items():
+                self._write_lidar(out, name, opened, enu)
+            for name, opened in cameras.items():
+                self._write_camera_index(out, name, opened)
+            for opened in self.opened:
+                _finish(opened)
+            out.write_attrs("", {"release_import": {"source": str(self.source.folder), "assumptions": scene.assumptions}})
+
+    def _keyed(self, opened: list[_Opened], suffix: str) -> dict[str, _Opened]:
+        """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name."""
+        out: dict[str, _Opened] = {}
+        for item in opened:
+            name = _prefix(item.path, suffix) if suffix else None
+            if name is None:
+                stem = item.path.name.split(".")[0]
+                name = stem if stem not in ("stream",) else "_".join(item.path.relative_to(self.source.folder).parts[:-1]) or stem
+            name = re.sub(r"[^A-Za-z0-9_-]+", "_", name)
+            if name in out:
+                item.summary.skipped.append(f"a second stream for sensor {name!r}; {out[name].summary.path} was used")
+                continue
+            out[name] = item
+        return out
+
+    def _models(self, rd_names: list[str]) -> dict[str, rec.RangeDopplerModel]:
+        models = []
+        for item in self.opened:
+            if item.model is not None:
+                models.append((item, item.model))
+            elif item.stream is not None and item.stream.kind.name == "RangeDopplerImageModel":
+                for _, record in _decoded(item):
+                    models.append((item, rec.rd_model(record)))
+                    break
+                if len(item.stream) > 1:
+                    item.summary.skipped.append(f"{len(item.stream) - 1} further model records ignored (the first is used)")
+        out = {}
+        for name in rd_names:
+            named = [(i, m) for i, m in models if name.lower() in i.path.name.lower()]
+            if len(named) == 1:
+                out[name] = named[0][1]
+                named[0][0].summary.written_to = f"calibration/{name}"
+            elif len(models) == 1:
+                out[name] = models[0][1]
+                models[0][0].summary.written_to = "calibration"
+                self.summary.assumptions.append(
+                    f"range-Doppler model {models[0][0].summary.path} applies to {name!r} (the only model in the scene)"
+                )
+        return out
+
+    def _write_sar(self, out, name: str, serial: str, opened: _Opened) -> None:
+        stamps = _Stamps(opened.summary)
+        holds_seen = set()
+        bad = {}
+        for _, record in _decoded(opened):
+            frame = rec.sar_frame(opened.stream.kind, record)
+            try:
+                image, holds = rec.sar_pixels(frame)
+            except ValueError as exc:
+                bad[str(exc)] = bad.get(str(exc), 0) + 1
+                continue
+            if not all(np.all(np.isfinite(v)) for v in (frame.origin_ecef, frame.di_ecef, frame.dj_ecef)):
+                bad["NaN in the image model"] = bad.get("NaN in the image model", 0) + 1
+                continue
+            ns = stamps.take(frame.timestamp_s)
+            if ns is None:
+                continue
+            out.append_sar(name, ns, image, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, [ns, ns])
+            holds_seen.add(holds)
+        stamps.report()
+        opened.summary.skipped.extend(f"{n} frames: {why}" for why, n in bad.items())
+        if not holds_seen:
+            return
+        opened.summary.written_to = f"sar/{name}"
+        magnitude_only = holds_seen == {"magnitude"}
+        out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
+        self.summary.assumptions += [
+            f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; i spans rows)",
+            f"sar/{name}: " + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
+            f"sar/{name}: aperture start/end are not in the release; aperture_ns = [t, t]",
+        ]
+
+    def _write_cubes(self, out, name: str, opened: _Opened, model: rec.RangeDopplerModel | None) -> None:
+        if model is None:
+            opened.summary.skipped.append("no RangeDopplerImageModel found for it: the cube shape is unknown")
+            return
+        shift, why = _doppler_shift(model)
+        if shift is None:
+            opened.summary.skipped.append(why)
+            return
+        shape = (model.range_axis[2], model.doppler_axis[2], model.num_rx)
+        stamps = _Stamps(opened.summary)
+        bad = 0
+        for _, record in _decoded(opened):
+            data = record["data"]
+            if len(data) != 8 * int(np.prod(shape)):
+                bad += 1
+                continue
+            ns = stamps.take(record["timestamp"])
+            if ns is None:
+                continue
+            cube = np.frombuffer(data, "<c8").reshape(shape)
+            out.append_radar(name, ns, np.fft.fftshift(cube, axes=1) if shift == "fftshift" else cube)
+        stamps.report()
+        if bad:
+            opened.summary.skipped.append(f"{bad} frames whose size is not 8 x {shape} bytes")
+        opened.summary.written_to = f"radar/{name}"
+        self.summary.assumptions += [f"radar/{name}: {why}", f"radar/{name}: range velocity sign as recorded (unknown convention)"]
+
+    def _write_detections(self, out, name: str, opened: _Opened) -> None:
+        stamps = _Stamps(opened.summary)
+        times, offsets, parts = [], [0], []
+        for offset, buf, start, end in _iter(opened):
+            try:
+                found = rec.detections(opened.stream.kind, buf, start, end)
+            except WireError as exc:
+                opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+                continue
+            ns = stamps.take(found.timestamp_s)
+            if ns is None:
+                continue
+            times.append(ns)
+            offsets.append(offsets[-1] + found.columns["range_m"].shape[0])
+            parts.append(found.columns)
+        stamps.report()
+        if not times:
+            return
+        columns = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+        nan = int(np.count_nonzero(~np.all(np.isfinite(columns["position_ecef"]), axis=1)))
+        out.write_detections(name, times, offsets, columns)
+        opened.summary.written_to = f"detections/{name}"
+        if nan:
+            opened.summary.notes.append(f"{nan} detections with NaN ECEF position kept as NaN")
+        meaning = "amplitude / confidence" if opened.stream.kind.generation == "2020" else "magnitude / doa_snr"
+        self.summary.assumptions.append(f"detections/{name}: magnitude and snr are the release's {meaning} (fields 3, 10)")
+
+    def _write_lidar(self, out, name: str, opened: _Opened, enu: LocalENU) -> None:
+        stamps = _Stamps(opened.summary)
+        ecef_parts, dropped, frame_note = [], 0, None
+        for offset, buf, start, end in _iter(opened):
+            try:
+                sweep = rec.lidar_sweep(opened.stream.kind, buf, start, end)
+            except WireError as exc:
+                opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+                continue
+            local = sweep.position_local
+            if local is None or rec.looks_ecef(local):
+                local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
+                frame_note = "enu"
+            keep = np.all(np.isfinite(local), axis=1) & np.all(np.isfinite(sweep.position_ecef), axis=1)
+            dropped += int(np.count_nonzero(~keep))
+            ns = stamps.take(sweep.timestamp_s)
+            if ns is None:
+                continue
+            points = np.column_stack([local[keep], np.nan_to_num(sweep.intensity[keep])]).astype(np.float32)
+            out.append_lidar(name, ns, points.reshape(-1, 4))
+            ecef_parts.append(sweep.position_ecef[keep])
+        stamps.report()
+        if not ecef_parts:
+            return
+        out.write_extra_array(f"lidar/{name}/position_ecef", np.concatenate(ecef_parts).reshape(-1, 3))
+        opened.summary.written_to = f"lidar/{name}"
+        if dropped:
+            opened.summary.skipped.append(f"{dropped} points with NaN positions")
+        if frame_note:
+            out.write_attrs(f"lidar/{name}", {"points_frame": "enu"})
+            self.summary.assumptions.append(
+                f"lidar/{name}: the release gives no local positions (or ECEF ones), so points are in the scene's ENU frame"
+            )
+        else:
+            self.summary.assumptions.append(f"lidar/{name}: LidarPoint.position_local taken as the lidar frame (unknown in the release)")
+
+    def _write_camera_index(self, out, name: str, opened: _Opened) -> None:
+        stamps = _Stamps(opened.summary)
+        times, index = [], []
+        for _, record in _decoded(opened):
+            ns = stamps.take(record["timestamp"]["common"])
+            if ns is not None:
+                times.append(ns)
+                index.append(record["frame_index"])
+        stamps.report()
+        if times:
+            out.write_camera_index(name, times, index)
+            opened.summary.written_to = f"camera_index/{name}"
+            self.summary.assumptions.append(f"camera_index/{name}: the video itself is not converted (container unknown)")
+
+    def close(self) -> None:
+        for opened in self.opened:
+            if opened.stream is not None:
+                opened.stream.close()
+
+
+def _existing_splits(out: pathlib.Path) -> dict[str, list[str]]:
+    path = out / DATASET_JSON
+    if not path.exists():
+        return {}
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+        return {k: list(v) for k, v in document["splits"].items()}
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ZendarError(f"{path}: expected the dataset.json of an earlier import to resume, found unreadable JSON ({exc})") from None
+
+
+def import_release(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    scene_id: str | None = None,
+    split: str = "train",
+    skip_corrupt: bool = False,
+    backend: str = "zarr",
+    log: Callable[[str], None] | None = None,
+) -> ImportSummary:
+    """Convert every scene of a release folder into a format-v1 dataset at ``out``.
+
+    Parameters
+    ----------
+    src
+        A release folder (one scene or a tree of ``<date>_<time>/<NNN>`` scenes), or one stream file.
+        Only read.
+    out
+        Dataset root to create or resume (scenes already complete there are kept and skipped).
+    scene_id
+        Id for the scene when ``src`` holds exactly one.
+    split
+        Split every imported scene goes into.
+    skip_corrupt
+        Skip truncated and corrupt stretches of streams (reported) instead of stopping.
+    backend
+        ``"zarr"`` or ``"hdf5"``.
+    log
+        Called with each scene id as it starts.
+
+    Raises
+    ------
+    ZendarError
+        A problem with the source (every unreadable stream listed) or the arguments.
+    """
+    src_path, out_path = pathlib.Path(src), pathlib.Path(out)
+    if not src_path.exists():
+        raise ZendarError(f"{src_path}: no such release folder or file")
+    resolved_src, resolved_out = src_path.resolve(), out_path.resolve()
+    if resolved_out == resolved_src or (src_path.is_dir() and resolved_src in resolved_out.parents):
+        raise ZendarError(f"{out_path}: the output must lie outside the release folder {src_path} (it is never modified)")
+    scenes = find_scenes(src_path)
+    if not scenes:
+        raise ZendarError(f"{src_path}: no stream files (*.pbs, *.pbs.gz, *.pb) found")
+    if scene_id is not None:
+        if len(scenes) != 1:
+            raise ZendarError(f"--scene-id: {src_path} holds {len(scenes)} scenes ({', '.join(s.scene_id for s in scenes)}); give it for one scene only")
+        scenes[0].scene_id = scene_id
+    splits = _existing_splits(out_path)
+    summary = ImportSummary(str(src_path), str(out_path))
+    base = resolved_src if src_path.is_dir() else resolved_src.parent
+    writer = DatasetWriter(out_path, "zendar-release", backend=backend, overwrite=True)
+    imports = []
+    problems: list[str] = []
+    try:
+        for source in scenes:
+            if writer.scene_path(source.scene_id).exists():
+                done = SceneSummary(source.scene_id, str(source.folder), status="already imported")
+                summary.scenes.append(done)
+                continue
+            imports.append(_SceneImport(source, base, skip_corrupt, problems))
+        if problems:
+            raise ZendarFormatError(f"{src_path}: {len(problems)} unreadable streams: " + "; ".join(problems), problems)
+        for job in imports:
+            if log:
+                log(job.source.scene_id)
+            job.run(writer)
+            summary.scenes.append(job.summary)
+            job.close()
+    finally:
+        for job in imports:
+            job.close()
+    for scene in summary.scenes:
+        if not any(scene.scene_id in ids for ids in splits.values()):
+            splits.setdefault(split, []).append(scene.scene_id)
+    for name in SPLITS:
+        splits.setdefault(name, [])
+    writer.finalize(splits)
+    write_json_atomic(out_path / SUMMARY_JSON, summary.to_json())
+    return summary

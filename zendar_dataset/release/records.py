@@ -1,0 +1,292 @@
+"""Decoded release records as arrays: SAR frames, detections, lidar sweeps, poses, cubes.
+
+Repeated sub-messages (detections, lidar points) are decoded column-wise
+(:func:`zendar_dataset.release.wire.decode_repeated_columns`); everything
+else goes through the strict generic decoder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from zendar_dataset.release import messages as m
+from zendar_dataset.release.messages import Kind
+from zendar_dataset.release.wire import WireError, decode, decode_repeated_columns, repeated_spans
+
+REAL_32U = 5
+COMPLEX_32F = 1
+REAL_32F = 3  # reserved in the schema, seen as an unknown enum value
+EARTH_RADIUS_MIN_M = 6.3e6  # a position this far from the Earth's centre is ECEF, not a local frame
+
+
+def gps_seconds_to_ns(seconds: float) -> int:
+    """GPS seconds (float64) to int64 nanoseconds, rounded to the nearest ns exactly (ties up).
+
+    Computed on the double's exact rational value, so no rounding happens before the last step
+    (``seconds * 1e9`` in float64 would already be off by up to 128 ns near 1.3e9 s).
+    """
+    numerator, denominator = float(seconds).as_integer_ratio()
+    return (2 * numerator * 10**9 + denominator) // (2 * denominator)
+
+
+def _vec(value: dict | None) -> np.ndarray:
+    if value is None:
+        return np.full(3, np.nan)
+    return np.array([value["x"], value["y"], value["z"]], np.float64)
+
+
+def _quat(value: dict | None) -> np.ndarray:
+    if value is None:
+        return np.full(4, np.nan)
+    return np.array([value["w"], value["x"], value["y"], value["z"]], np.float64)
+
+
+@dataclass
+class SarFrame:
+    """One SAR ``Image`` record.
+
+    Attributes
+    ----------
+    timestamp_s : float
+        GPS seconds at the middle of the aperture.
+    position_ecef, attitude_wxyz : ndarray, (3,) / (4,), float64
+        Vehicle pose (NaN when absent).
+    frame_id : int or None
+    serial : str or None
+    origin_ecef, di_ecef, dj_ecef : ndarray, (3,), float64
+        Image model: pixel (i, j) at origin + i·di + j·dj, ECEF metres.
+    rows, cols : int
+    pixel_type : int or None
+        The ``type`` enum as written (unreliable, see :func:`sar_pixels`).
+    data : memoryview
+        The pixel buffer.
+    """
+
+    timestamp_s: float
+    position_ecef: np.ndarray
+    attitude_wxyz: np.ndarray
+    frame_id: int | None
+    serial: str | None
+    origin_ecef: np.ndarray
+    di_ecef: np.ndarray
+    dj_ecef: np.ndarray
+    rows: int
+    cols: int
+    pixel_type: int | None
+    data: memoryview
+
+
+def sar_frame(kind: Kind, record: dict) -> SarFrame:
+    """A :class:`SarFrame` from a decoded ``Image`` of either generation."""
+    top = record.get("meta", {}) if kind.generation == "2021" else record
+    cartesian = record["cartesian"]
+    model, data = cartesian["model"], cartesian["data"]
+    return SarFrame(
+        timestamp_s=float(top.get("timestamp", np.nan)),
+        position_ecef=_vec(top.get("position")),
+        attitude_wxyz=_quat(top.get("attitude")),
+        frame_id=top.get("frame_id"),
+        serial=top.get("serial"),
+        origin_ecef=_vec(model.get("origin")),
+        di_ecef=_vec(model.get("di")),
+        dj_ecef=_vec(model.get("dj")),
+        rows=int(data["rows"]),
+        cols=int(data["cols"]),
+        pixel_type=data.get("type"),
+        data=data.get("data", memoryview(b"")),
+    )
+
+
+def sar_pixels(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str]:
+    """The image ``[rows, cols]`` complex64 with element [i, j] = pixel (i, j), and what it holds.
+
+    The element size comes from ``len(data) / (rows·cols)`` (the ``type`` enum only breaks
+    ties: absent, it reads as COMPLEX_32F although the data are uint32). 4 bytes: ``<u4``
+    magnitude (``<f4`` when ``type`` says REAL_32F); 8 bytes: ``<c8`` complex.
+
+    Parameters
+    ----------
+    i_fastest
+        True: pixel (i, j) is flat element ``j·rows + i`` (the SDK viewer's reading);
+        False: ``i·cols + j`` (row-major rows × cols).
+
+    Returns
+    -------
+    image : ndarray, [rows, cols], complex64
+        Magnitude images have zero imaginary part.
+    holds : str
+        ``"complex"`` or ``"magnitude"``.
+
+    Raises
+    ------
+    ValueError
+        When the buffer size is not 4 or 8 bytes per pixel.
+    """
+    count = frame.rows * frame.cols
+    size = len(frame.data)
+    if count == 0 or size % count or size // count not in (4, 8):
+        raise ValueError(f"{size} bytes of pixel data do not hold rows×cols = {frame.rows}×{frame.cols} pixels of 4 or 8 bytes")
+    per_pixel = size // count
+    if per_pixel == 8:
+        flat = np.frombuffer(frame.data, "<c8")
+        holds = "complex"
+    else:
+        flat = np.frombuffer(frame.data, "<f4" if frame.pixel_type == REAL_32F else "<u4")
+        holds = "magnitude"
+    grid = flat.reshape(frame.cols, frame.rows).T if i_fastest else flat.reshape(frame.rows, frame.cols)
+    return grid.astype(np.complex64), holds
+
+
+@dataclass
+class Pose:
+    """One tracklog ``Position``: GPS seconds, ECEF metres of the IMU, IMU(FRD)→ECEF quaternion wxyz."""
+
+    timestamp_s: float
+    position_ecef: np.ndarray
+    attitude_wxyz: np.ndarray
+
+
+def pose(record: dict) -> Pose:
+    return Pose(float(record["timestamp"]), _vec(record.get("position")), _quat(record.get("attitude")))
+
+
+@dataclass
+class Detections:
+    """One ``TrackerState``: the frame's time and id, and per-detection columns.
+
+    ``columns`` maps ``range_m``, ``azimuth_rad``, ``elevation_rad``, ``range_velocity_mps``,
+    ``magnitude``, ``snr``, ``rd_mean_snr`` to ``[P]`` float64 and ``position_ecef`` to ``[P, 3]``
+    float64; NaN where the release has NaN or the field is absent.
+    """
+
+    timestamp_s: float
+    frame_id: int | None
+    serial: str | None
+    columns: dict[str, np.ndarray]
+
+
+_POINT_COLUMNS = {
+    "range_m": "range",
+    "azimuth_rad": "azimuth",
+    "elevation_rad": "elevation",
+    "range_velocity_mps": "range_velocity",
+    "magnitude": "magnitude",
+    "snr": "snr",
+    "rd_mean_snr": "rd_mean_snr",
+}
+
+
+def _check_others(message, others: dict[int, list], repeated: int) -> None:
+    for number, items in others.items():
+        spec = message.fields.get(number)
+        if spec is None:
+            raise WireError(f"{message.name}: unknown field {number}", 0)
+        if number == repeated or any(wire != message.wire_type(number) for wire, _ in items):
+            raise WireError(f"{message.name}.{spec.name} (field {number}): unexpected wire type", 0)
+    missing = message.required - set(others) - {repeated}
+    if missing:
+        raise WireError(f"{message.name}: missing required field {sorted(missing)}", 0)
+
+
+def _columns(element, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
+    columns, slow = decode_repeated_columns(element, buf, offsets, lengths)
+    n = offsets.shape[0]
+    for index in slow:
+        decoded = decode(element, buf, int(offsets[index]), int(offsets[index] + lengths[index]))
+        for name, value in _flatten(decoded):
+            columns.setdefault(name, np.full(n, np.nan))[index] = value
+    return columns
+
+
+def _flatten(decoded: dict, prefix: str = ""):
+    for name, value in decoded.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f"{prefix}{name}.")
+        elif isinstance(value, (int, float)):
+            yield f"{prefix}{name}", value
+
+
+def _xyz(columns: dict[str, np.ndarray], name: str, n: int) -> np.ndarray:
+    return np.stack([columns.get(f"{name}.{axis}", np.full(n, np.nan)) for axis in "xyz"], axis=1)
+
+
+def detections(kind: Kind, buf: memoryview, start: int, end: int) -> Detections:
+    """A :class:`Detections` from one ``TrackerState`` record of either generation (strictly checked)."""
+    offsets, lengths, others = repeated_spans(buf, start, end, 2)
+    _check_others(kind.message, others, 2)
+    head_message = m.METADATA if kind.generation == "2021" else m.TIME_RECORD
+    head = {}
+    if 1 in others:
+        offset, length = others[1][-1][1]
+        head = decode(head_message, buf, offset, offset + length)
+    if kind.generation == "2021":
+        timestamp, frame_id, serial = head.get("timestamp", np.nan), head.get("frame_id"), head.get("serial")
+    else:
+        timestamp = head.get("common", np.nan)
+        frame_id = others[3][-1][1] if 3 in others else None
+        serial = None
+        if 4 in others:
+            offset, length = others[4][-1][1]
+            serial = bytes(buf[offset : offset + length]).decode("utf-8", errors="replace")
+    n = offsets.shape[0]
+    raw = _columns(m.POINT, buf, offsets, lengths)
+    columns = {ours: raw.get(theirs, np.full(n, np.nan)) for ours, theirs in _POINT_COLUMNS.items()}
+    columns["position_ecef"] = _xyz(raw, "position", n)
+    return Detections(float(timestamp), frame_id, serial, columns)
+
+
+@dataclass
+class LidarSweep:
+    """One ``LidarPointsFrame``: GPS seconds and per-point ``[P, 3]`` positions and ``[P]`` intensity.
+
+    ``position_local`` is None for the January-2021 draft layout, which has one position only.
+    """
+
+    timestamp_s: float
+    position_ecef: np.ndarray
+    position_local: np.ndarray | None
+    intensity: np.ndarray
+
+
+def lidar_sweep(kind: Kind, buf: memoryview, start: int, end: int) -> LidarSweep:
+    """A :class:`LidarSweep` from one ``LidarPointsFrame`` of either point layout."""
+    offsets, lengths, others = repeated_spans(buf, start, end, 2)
+    _check_others(kind.message, others, 2)
+    offset, _ = others[1][-1][1]
+    timestamp = float(np.frombuffer(buf, "<f8", 1, offset)[0])
+    element = kind.message.fields[2].type
+    n = offsets.shape[0]
+    raw = _columns(element, buf, offsets, lengths)
+    intensity = raw.get("intensity", np.full(n, np.nan))
+    if kind.generation == "2021-01 draft":
+        return LidarSweep(timestamp, _xyz(raw, "position", n), None, intensity)
+    return LidarSweep(timestamp, _xyz(raw, "position_global", n), _xyz(raw, "position_local", n), intensity)
+
+
+def looks_ecef(points: np.ndarray) -> bool:
+    """Whether finite points sit at least 6300 km from the origin (ECEF rather than a sensor frame)."""
+    finite = points[np.all(np.isfinite(points), axis=1)]
+    return bool(finite.size) and bool(np.median(np.linalg.norm(finite, axis=1)) > EARTH_RADIUS_MIN_M)
+
+
+@dataclass
+class RangeDopplerModel:
+    """A ``RangeDopplerImageModel``: axes (start, delta, count), receivers ``[A, 3]`` and wavelength (m)."""
+
+    num_rx: int
+    range_axis: tuple[float, float, int]
+    doppler_axis: tuple[float, float, int]
+    rx_positions_m: np.ndarray
+    wavelength_m: float
+
+
+def rd_model(record: dict) -> RangeDopplerModel:
+    def axis(value: dict) -> tuple[float, float, int]:
+        return float(value["start"]), float(value["delta"]), int(value["count"])
+
+    rx = np.array([_vec(v) for v in record.get("rx_positions", [])], np.float64).reshape(-1, 3)
+    return RangeDopplerModel(
+        int(record["num_rx"]), axis(record["range_axis"]), axis(record["doppler_axis"]), rx, float(record["wavelength"])
+    )

@@ -1,0 +1,386 @@
+"""Reading one ``.pbs`` stream of the release: framing, message kind, records.
+
+A stream is an optional 8-byte header, then records ``[u32 little-endian
+length][payload]`` up to the end of the file, possibly gzip-compressed.
+Nothing here trusts the file name for the framing: the header and gzip are
+chosen by checking that the chain of ``4 + length`` steps lands exactly on the
+end of the (decompressed) bytes.  The message kind and schema generation are
+sniffed by decoding the first records strictly with every candidate
+definition (``release/messages.py``); the file name only breaks ties.
+
+Example
+-------
+>>> for record in iter_messages("1739000J1Q_images.pbs"):  # doctest: +SKIP
+...     print(record["timestamp"], record["cartesian"]["data"]["rows"])
+"""
+
+from __future__ import annotations
+
+import gzip
+import mmap
+import os
+import pathlib
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.release.messages import Kind, kinds_named
+from zendar_dataset.release.wire import WireError, decode
+
+HEADER_BYTES = 8
+_GZIP_MAGIC = b"\x1f\x8b"
+_SNIFF_RECORDS = 16
+
+
+@dataclass(frozen=True)
+class Framing:
+    """How a stream's bytes are laid out.
+
+    Attributes
+    ----------
+    header_bytes : int
+        0 or 8: bytes skipped before the first length prefix.
+    gzip : bool
+        Whether the file is gzip-compressed (offsets then count decompressed bytes).
+    reason : str
+        Why this framing was chosen, for the import summary.
+    """
+
+    header_bytes: int
+    gzip: bool
+    reason: str
+
+    def describe(self) -> str:
+        header = "8-byte header" if self.header_bytes else "no header"
+        return f"{header}{', gzip' if self.gzip else ''} ({self.reason})"
+
+
+@dataclass(frozen=True)
+class Loss:
+    """Bytes skipped with ``skip_corrupt``: where, how many and why."""
+
+    offset: int
+    size_bytes: int
+    reason: str
+
+
+@dataclass
+class _Chain:
+    """The records found by following length prefixes from ``start``."""
+
+    start: int
+    offsets: list[int] = field(default_factory=list)  # payload offsets
+    lengths: list[int] = field(default_factory=list)
+    end: int = 0  # where following stopped
+    problem: str | None = None  # why it stopped before the end of the data
+
+    @property
+    def tiles(self) -> bool:
+        return self.problem is None
+
+
+def _follow(data: memoryview, start: int, stop_at_first: bool = False) -> _Chain:
+    n = len(data)
+    chain = _Chain(start)
+    lengths = np.frombuffer(data, np.uint8)
+    pos = start
+    while pos + 4 <= n:
+        length = int(lengths[pos]) | int(lengths[pos + 1]) << 8 | int(lengths[pos + 2]) << 16 | int(lengths[pos + 3]) << 24
+        if pos + 4 + length > n:
+            chain.end = pos
+            chain.problem = (
+                f"the record at byte offset {pos} declares {length} bytes, only {n - pos - 4} are available"
+            )
+            return chain
+        chain.offsets.append(pos + 4)
+        chain.lengths.append(length)
+        pos += 4 + length
+        if stop_at_first:
+            break
+    chain.end = pos
+    if pos != n and not stop_at_first:
+        chain.problem = f"{n - pos} bytes at byte offset {pos} are too few for a length prefix (4 bytes)"
+    return chain
+
+
+def _read_bytes(path: pathlib.Path) -> tuple[memoryview, bool, Any]:
+    """The stream's bytes (decompressed when gzip) and whether it was gzip; the third item keeps an mmap alive."""
+    with open(path, "rb") as handle:
+        magic = handle.read(2)
+        if magic == _GZIP_MAGIC:
+            handle.seek(0)
+            return memoryview(_gunzip(path, handle.read())), True, None
+        handle.seek(0, os.SEEK_END)
+        if handle.tell() == 0:
+            return memoryview(b""), False, None
+        mapped = mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
+    return memoryview(mapped), False, mapped
+
+
+class _TruncatedGzip(Exception):
+    def __init__(self, data: bytes, consumed: int) -> None:
+        self.data = data
+        self.consumed = consumed
+
+
+def _gunzip(path: pathlib.Path, raw: bytes) -> bytes:
+    try:
+        return gzip.decompress(raw)
+    except EOFError:
+        pass
+    except (OSError, zlib.error) as exc:
+        raise ZendarFormatError(f"{path}: expected gzip data, found a corrupt gzip stream ({exc})") from None
+    # Truncated: keep what decompresses, so the record chain can say where the data ends.
+    decompressor = zlib.decompressobj(wbits=31)
+    data = decompressor.decompress(raw)
+    raise _TruncatedGzip(data, len(raw))
+
+
+def _first_record_parses(data: memoryview, chain: _Chain, kinds: tuple[Kind, ...]) -> bool:
+    for offset, length in zip(chain.offsets, chain.lengths):
+        if length == 0:
+            continue
+        for kind in kinds:
+            try:
+                decode(kind.message, data, offset, offset + length)
+                return True
+            except WireError:
+                continue
+        return False
+    return True  # only empty records: nothing contradicts this framing
+
+
+def _choose_framing(path: pathlib.Path, data: memoryview, gzipped: bool, kinds: tuple[Kind, ...]) -> tuple[Framing, _Chain]:
+    n = len(data)
+    plain = _follow(data, 0)
+    if n < HEADER_BYTES:
+        return Framing(0, gzipped, "shorter than a header"), plain
+    headed = _follow(data, HEADER_BYTES)
+    zero_header = bytes(data[:HEADER_BYTES]) == bytes(HEADER_BYTES)
+    if plain.tiles and headed.tiles:
+        if zero_header:
+            return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 0 and from byte 8; bytes 0-7 are zero"), headed
+        if _first_record_parses(data, headed, kinds) and not _first_record_parses(data, plain, kinds):
+            return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 0 and 8; only byte 8 parses"), headed
+        return Framing(0, gzipped, "lengths tile the file from byte 0 and from byte 8; the first record parses from byte 0"), plain
+    if plain.tiles and _first_record_parses(data, plain, kinds):
+        return Framing(0, gzipped, "lengths tile the file from byte 0"), plain
+    if headed.tiles and _first_record_parses(data, headed, kinds):
+        return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 8"), headed
+    # Neither tiles: truncated or corrupt. Keep the framing that reads further with a parsing first record.
+    candidates = [c for c in (headed, plain) if _first_record_parses(data, c, kinds)] or [headed, plain]
+    if zero_header and headed in candidates:
+        best = headed
+    else:
+        best = max(candidates, key=lambda c: (c.end, c.start))
+    header = best.start
+    return Framing(header, gzipped, f"no framing tiles the file; {'byte 8' if header else 'byte 0'} reads furthest"), best
+
+
+def _resync(data: memoryview, start: int, kind: Kind) -> int | None:
+    """The first offset after ``start`` from which length prefixes tile the rest and the first record parses."""
+    n = len(data)
+    if n - start < 5:
+        return None
+    raw = np.frombuffer(data, np.uint8)[start:].astype(np.int64)
+    count = raw.shape[0] - 3
+    lengths = raw[:count] | raw[1 : count + 1] << 8 | raw[2 : count + 2] << 16 | raw[3 : count + 3] << 24
+    positions = np.arange(count, dtype=np.int64) + start
+    ends = positions + 4 + lengths
+    # A resync point must start a non-empty record that decodes (runs of zero bytes chain as empty records).
+    for pos in positions[(positions > start) & (ends <= n) & (lengths > 0)]:
+        chain = _follow(data, int(pos))
+        if not chain.tiles:
+            continue
+        try:
+            for offset, length in zip(chain.offsets[:4], chain.lengths[:4]):
+                if length:
+                    decode(kind.message, data, offset, offset + length)
+        except WireError:
+            continue
+        return int(pos)
+    return None
+
+
+class ReleaseStream:
+    """One ``.pbs`` stream: its framing, message kind and records.
+
+    Parameters
+    ----------
+    path : path-like
+        The stream file (read only, never modified).
+    kind : str, optional
+        Message name (``"Image"``, ``"TrackerState"``, ``"Position"``, ``"LidarPointsFrame"``,
+        ``"RangeDopplerFrame"``, ``"RangeDopplerImageModel"``, ``"CameraIndexRecord"``, or a raw
+        kind); sniffed when None.  The schema generation is always sniffed.
+    skip_corrupt : bool
+        Skip truncated or corrupt stretches (recorded in :attr:`losses`) instead of raising.
+
+    Attributes
+    ----------
+    framing : Framing
+    kind : Kind
+        The message kind and generation found.
+    losses : list of Loss
+        What ``skip_corrupt`` skipped.
+    empty_records : int
+        Records of length 0 (empty messages; not yielded).
+    notes : list of str
+        How the kind was decided, for the import summary.
+
+    Raises
+    ------
+    ZendarFormatError
+        At the byte offset where the file is truncated or corrupt (expected and
+        available bytes), or when no known message decodes its records.
+    """
+
+    def __init__(self, path: str | os.PathLike, kind: str | None = None, *, skip_corrupt: bool = False) -> None:
+        self.path = pathlib.Path(path)
+        self.skip_corrupt = skip_corrupt
+        self.losses: list[Loss] = []
+        self.notes: list[str] = []
+        self.empty_records = 0
+        candidates = kinds_named(kind)
+        try:
+            data, gzipped, self._mapping = _read_bytes(self.path)
+        except _TruncatedGzip as truncated:
+            data, gzipped, self._mapping = memoryview(truncated.data), True, None
+            self._gzip_truncated = truncated.consumed
+        else:
+            self._gzip_truncated = None
+        self.size_bytes = len(data)
+        self._data = data
+        self.framing, chain = _choose_framing(self.path, data, gzipped, candidates)
+        self.kind = self._sniff(chain, candidates)
+        self._offsets, self._lengths = self._records(chain)
+
+    def _where(self, offset: int) -> str:
+        unit = " (decompressed)" if self.framing.gzip else ""
+        return f"{self.path}: byte offset {offset}{unit}"
+
+    def _problem(self, offset: int, size: int, reason: str) -> None:
+        if not self.skip_corrupt:
+            raise ZendarFormatError(f"{self._where(offset)}: {reason} (use --skip-corrupt to skip it)")
+        self.losses.append(Loss(offset, size, reason))
+
+    def _records(self, chain: _Chain) -> tuple[list[int], list[int]]:
+        offsets, lengths = list(chain.offsets), list(chain.lengths)
+        if self._gzip_truncated is not None and chain.tiles:
+            chain.problem = "the gzip stream is truncated"
+        while not chain.tiles:
+            reason = chain.problem or "corrupt"
+            if self._gzip_truncated is not None:
+                reason += f"; the gzip stream ends early (after {self._gzip_truncated} compressed bytes)"
+            resume = _resync(self._data, chain.end, self.kind) if self.skip_corrupt else None
+            lost = (resume if resume is not None else len(self._data)) - chain.end
+            if lost == 0:
+                break
+            self._problem(chain.end, lost, f"truncated or corrupt: {reason}")
+            if resume is None:
+                break
+            chain = _follow(self._data, resume)
+            offsets += chain.offsets
+            lengths += chain.lengths
+        return offsets, lengths
+
+    def _sniff(self, chain: _Chain, candidates: tuple[Kind, ...]) -> Kind:
+        alive = list(candidates)
+        seen = 0
+        first_error: tuple[int, str] | None = None
+        for offset, length in zip(chain.offsets, chain.lengths):
+            if length == 0:
+                continue
+            survivors = []
+            for kind in alive:
+                try:
+                    decode(kind.message, self._data, offset, offset + length)
+                    survivors.append(kind)
+                except WireError as exc:
+                    if first_error is None:
+                        first_error = (offset, str(exc))
+            if not survivors:
+                tried = ", ".join(k.label for k in alive)
+                detail = f" (first mismatch: {first_error[1]})" if first_error else ""
+                raise ZendarFormatError(f"{self._where(offset - 4)}: expected a record of {tried}, found none decodes{detail}")
+            alive = survivors
+            seen += 1
+            if len(alive) == 1 or seen >= _SNIFF_RECORDS:
+                break
+        if not alive or seen == 0:
+            kind = candidates[0]
+            self.notes.append(f"no non-empty record to sniff; taken as {kind.label}")
+            return kind
+        if len(alive) > 1:
+            hinted = [k for k in alive if any(h in self.path.name.lower() for h in k.name_hints)]
+            chosen = (hinted or alive)[0]
+            how = "the file name" if hinted else "the release's preference order"
+            self.notes.append(
+                f"records decode as {', '.join(k.label for k in alive)}; {how} chose {chosen.label}"
+            )
+            return chosen
+        self.notes.append(f"only {alive[0].label} decodes the first {seen} records")
+        return alive[0]
+
+    def __len__(self) -> int:
+        return len(self._offsets)
+
+    def records(self) -> Iterator[tuple[int, memoryview, int, int]]:
+        """Yield ``(offset, buffer, start, end)`` of every non-empty record, in file order.
+
+        ``offset`` is the byte offset of the record's length prefix.
+        """
+        for offset, length in zip(self._offsets, self._lengths):
+            if length == 0:
+                self.empty_records += 1
+                continue
+            yield offset - 4, self._data, offset, offset + length
+
+    def __iter__(self) -> Iterator[dict[str, Any]]:
+        """Decoded records (field name -> value) in file order; corrupt ones raise or are skipped."""
+        for offset, data, start, end in self.records():
+            try:
+                yield decode(self.kind.message, data, start, end)
+            except WireError as exc:
+                self._problem(offset, end - offset, f"record of {self.kind.label} does not decode: {exc}")
+
+    def close(self) -> None:
+        """Drop this stream's hold on the file mapping; it is unmapped once no yielded record still views it."""
+        self._data = memoryview(b"")
+        self._mapping = None
+
+    def __enter__(self) -> "ReleaseStream":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def iter_messages(
+    path: str | os.PathLike, kind: str | None = None, *, skip_corrupt: bool = False
+) -> Iterator[dict[str, Any]]:
+    """Decoded messages of a ``.pbs`` stream, framing, kind and generation detected.
+
+    Parameters
+    ----------
+    path
+        The stream file.
+    kind
+        Message name to insist on; sniffed when None (see :class:`ReleaseStream`).
+    skip_corrupt
+        Skip truncated or corrupt stretches instead of raising.
+
+    Yields
+    ------
+    dict
+        Field name -> value; ``bytes`` fields are ``memoryview`` slices valid while iterating.
+    """
+    stream = ReleaseStream(path, kind, skip_corrupt=skip_corrupt)
+    try:
+        yield from stream
+    finally:
+        stream.close()
