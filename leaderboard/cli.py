@@ -18,6 +18,8 @@ from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 
 EXIT_ENVIRONMENT = 1
+#: The most scene resamples the evaluator takes for its intervals.
+MAX_BOOTSTRAP = 100_000
 
 
 def _existing_store(db: str):
@@ -222,8 +224,10 @@ def main(argv: list[str] | None = None) -> int:
     for name in ("quota", "max_bytes", "workers", "memory_mb"):
         if getattr(args, name, 1) <= 0:
             parser.error(f"--{name.replace('_', '-')} must be positive")
-    if getattr(args, "bootstrap", 0) < 0 or getattr(args, "time_limit_s", 1) <= 0:
-        parser.error("--bootstrap must be 0 or more and --time-limit-s positive")
+    if not 0 <= getattr(args, "bootstrap", 0) <= MAX_BOOTSTRAP:
+        parser.error(f"--bootstrap must be between 0 and {MAX_BOOTSTRAP:,}")
+    if getattr(args, "time_limit_s", 1) <= 0:
+        parser.error("--time-limit-s must be positive")
 
     def body() -> int:
         try:

@@ -1,0 +1,168 @@
+"""Submission rules, the public/private division and the shown scores (no server)."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+from tests.leaderboard.conftest import ground_truth, meta, submission
+from zendar_leaderboard.ground_truth import divide_frames, frames_sha256
+from zendar_leaderboard.scoring import ap_points, score_submission
+from zendar_leaderboard.submission import check_submission
+
+
+def body(document) -> bytes:
+    return json.dumps(document).encode()
+
+
+def test_a_valid_submission_passes_and_keeps_only_known_meta():
+    gt = ground_truth()
+    document = submission(gt)
+    document["meta"]["favourite_colour"] = "blue"
+    checked = check_submission(body(document), list(gt["frames"]))
+    assert checked.ok, checked.problems
+    assert "favourite_colour" not in checked.meta and checked.meta["method"] == "noisy oracle"
+
+
+def test_every_meta_problem_is_listed_at_once():
+    gt = ground_truth()
+    document = submission(gt)
+    document["meta"] = {
+        "method": "m" * 41,
+        "team": "",
+        "description": 7,
+        "url": "javascript:alert(1)",
+        "uses_sar": "yes",
+        "uses_camera": 1,
+        "runtime_ms": 1e300,
+        "hardware": "gpu\x00",
+    }
+    problems = check_submission(body(document), list(gt["frames"])).problems
+    expected = [
+        "'method' has 41 characters, more than the limit of 40",
+        "'team' is empty",
+        "missing 'contact'",
+        "'description' must be a string, got int",
+        "'url' must start with http:// or https://",
+        "'uses_sar' must be true or false, got str",
+        "'uses_camera' must be true or false, got int",
+        "missing 'uses_lidar'",
+        "missing 'external_data'",
+        "missing 'uses_supervised'",
+        "missing 'uses_unsupervised_pretraining'",
+        "'runtime_ms' must lie in [0, 86400000]",
+        "'hardware' contains control characters",
+    ]
+    for text in expected:
+        assert any(text in p for p in problems), (text, problems)
+    assert len(problems) == len(expected)
+
+
+def test_meta_and_detection_problems_come_together_with_frame_set_problems():
+    gt = ground_truth()
+    frame_ids = list(gt["frames"])
+    document = submission(gt)
+    del document["meta"]["runtime_ms"]
+    del document["results"][frame_ids[0]]
+    document["results"][frame_ids[1]][0]["score"] = "high"
+    document["results"]["elsewhere/1"] = []
+    problems = check_submission(body(document), frame_ids).problems
+    assert len(problems) == 4, problems
+    assert any("runtime_ms" in p for p in problems)
+    assert any(f"{frame_ids[0]!r} is missing from predictions" in p for p in problems)
+    assert any(f"{frame_ids[1]!r} detection 0: 'score' must be a number" in p for p in problems)
+    assert any("'elsewhere/1' is not in the ground truth" in p for p in problems)
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [b"[" * 200_000, b'{"a":' * 5_000 + b"1" + b"}" * 5_000, b'{"meta": ' + b"[" * 2_000 + b"]" * 2_000 + b"}"],
+    ids=["open-brackets", "deep-objects", "deep-meta"],
+)
+def test_nesting_bombs_are_refused_with_one_clear_problem(raw):
+    started = time.process_time()
+    checked = check_submission(raw)
+    assert checked.problems and "nested more than 1024 levels deep" in checked.problems[0]
+    assert len(checked.problems) == 1
+    assert time.process_time() - started < 5  # refused by the parser, not by walking the tree
+
+
+@pytest.mark.parametrize("number", [b"1e400", b"-1e999", b"1" + b"0" * 400, b"9" * 1_000_000])
+def test_numbers_too_large_for_a_double_are_refused(number):
+    gt = ground_truth(n_scenes=1, frames_per_scene=1)
+    frame_id = next(iter(gt["frames"]))
+    raw = b'{"meta": %s, "results": {"%s": [{"x": %s, "y": 1.0, "score": 0.5}]}}' % (
+        json.dumps(meta()).encode(), frame_id.encode(), number)
+    problems = check_submission(raw, [frame_id]).problems
+    assert len(problems) == 1 and "too large for a double" in problems[0], problems
+    assert len(problems[0]) < 200  # the number is not quoted back
+
+
+def test_nan_literals_and_broken_json_are_refused():
+    assert "not valid JSON" in check_submission(b'{"meta": {}, "results": {"s/1": [{"x": NaN}]}}').problems[0]
+    assert "not valid JSON" in check_submission(b'{"meta": ').problems[0]
+    assert "expected a JSON object" in check_submission(b"[1, 2]").problems[0]
+
+
+def test_parts_are_whole_scenes_disjoint_and_cover_the_split():
+    gt = ground_truth(n_scenes=5)
+    frame_ids = list(gt["frames"])
+    public, private = divide_frames(frame_ids)
+    assert set(public) | set(private) == set(frame_ids) and not set(public) & set(private)
+    scenes = lambda ids: {f.rpartition("/")[0] for f in ids}  # noqa: E731
+    assert len(scenes(public)) == 3 and len(scenes(private)) == 2
+    assert not scenes(public) & scenes(private)
+    assert divide_frames(list(reversed(frame_ids))) == (tuple(reversed(public)), tuple(reversed(private)))
+
+
+def test_a_single_scene_is_divided_in_time_not_as_strings():
+    frame_ids = ["s/1000", "s/900", "s/1100", "s/800", "s/1200"]
+    public, private = divide_frames(frame_ids)
+    assert public == ("s/1000", "s/900", "s/800") and private == ("s/1100", "s/1200")
+
+
+def test_the_checksum_ignores_key_order_but_not_labels():
+    gt = ground_truth()
+    reordered = dict(reversed(list(gt["frames"].items())))
+    assert frames_sha256(reordered) == frames_sha256(gt["frames"])
+    moved = json.loads(json.dumps(gt["frames"]))
+    first = next(iter(moved))
+    moved[first][0]["x"] += 0.01
+    assert frames_sha256(moved) != frames_sha256(gt["frames"])
+
+
+def test_shown_score_of_a_hand_worked_case():
+    from zendar_leaderboard.ground_truth import TestSplit
+
+    # Public part: scene a (two cars near, one mid). Predictions by score: TP 0.9, FP 0.8, TP 0.7 in
+    # near -> near AP = 1/2 * 1 + 1/2 * 2/3 = 0.8333 -> 83.3; the mid car is missed -> mid AP 0.
+    # 'all': G = 3, TP at 0.9 (P 1, R 1/3), FP 0.8, TP 0.7 (P 2/3, R 2/3) -> 1/3 + 1/3 * 2/3 = 0.5556 -> 55.6.
+    frames = {
+        "a/100": [{"x": 0.0, "y": 10.0}, {"x": -8.0, "y": -3.0}, {"x": 20.0, "y": -5.0}],
+        "b/100": [{"x": -40.0, "y": 2.0}],
+    }
+    split = TestSplit(frames, "test", frames_sha256(frames), ("a/100",), ("b/100",))
+    document = {
+        "meta": meta(),
+        "results": {
+            "a/100": [
+                {"x": 0.5, "y": 9.0, "score": 0.9},
+                {"x": 5.0, "y": 5.0, "score": 0.8},
+                {"x": -7.0, "y": -2.0, "score": 0.7},
+            ],
+            "b/100": [{"x": -40.0, "y": 3.0, "score": 0.4}],
+        },
+    }
+    scores = score_submission(document, split, bootstrap=0)
+    assert scores["public"]["ap"] == {"near": 83.3, "mid": 0.0, "far": None, "all": 55.6}
+    assert scores["private"]["ap"] == {"near": None, "mid": None, "far": 100.0, "all": 100.0}
+    assert scores["public"]["ci"] is None  # one scene: no interval
+    assert set(scores["public"]) == {"ap", "ci", "pr_curves", "n_frames"}  # no counts, nothing per frame
+    assert scores["gt_sha256"] == split.sha256 and scores["protocol_version"] == "1.0"
+
+
+def test_ap_points_round_to_a_tenth():
+    assert ap_points(0.83333) == 83.3 and ap_points(0.55556) == 55.6 and ap_points(1.0) == 100.0
+    assert ap_points(0.0) == 0.0 and ap_points(None) is None
