@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from zendar_dataset.cli.common import EXIT_OK
+from zendar_dataset.cli.common import EXIT_OK, writing
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -16,7 +16,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("root", metavar="ROOT", help="dataset root (directory or fsspec URL)")
     parser.add_argument("--split", required=True, help="split to export (train, val, ...)")
-    parser.add_argument("-o", "--output", required=True, help="JSON file to write (must not exist)")
+    parser.add_argument("-o", "--output", required=True, help="JSON file to write (must not exist unless --overwrite; never inside ROOT)")
     parser.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists")
     parser.set_defaults(func=run)
 
@@ -26,8 +26,9 @@ def run(args: argparse.Namespace) -> int:
     from zendar_dataset.format.ground_truth import export_ground_truth
 
     try:
-        n_frames = export_ground_truth(args.root, args.split, args.output, overwrite=args.overwrite)
+        with writing(args.output):
+            n_frames = export_ground_truth(args.root, args.split, args.output, overwrite=args.overwrite)
     except FileExistsError as exc:
-        raise ZendarError(str(exc)) from None
+        raise ZendarError(f"{args.output} exists already (pass --overwrite to replace it)") from None
     print(f"wrote {args.output}: {n_frames} frames of split {args.split!r}")
     return EXIT_OK

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from zendar_dataset.cli.common import writing
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sim.profiles import PROFILES
 
@@ -47,16 +48,17 @@ def _run(args: argparse.Namespace) -> int:
         raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
     if args.jobs is not None and args.jobs < 1:
         raise ZendarError(f"--jobs must be at least 1, got {args.jobs}")
-    out = synthesize_dataset(
-        args.out,
-        profile=args.profile,
-        n_scenes=args.scenes,
-        seed=args.seed,
-        split_ratios=args.split_ratios,
-        backend=args.backend,
-        progress=not args.quiet,
-        withhold_test_labels=args.withhold_test_labels,
-        jobs=usable_cpus() if args.jobs is None else args.jobs,
-    )
+    with writing(args.out):
+        out = synthesize_dataset(
+            args.out,
+            profile=args.profile,
+            n_scenes=args.scenes,
+            seed=args.seed,
+            split_ratios=args.split_ratios,
+            backend=args.backend,
+            progress=not args.quiet,
+            withhold_test_labels=args.withhold_test_labels,
+            jobs=usable_cpus() if args.jobs is None else args.jobs,
+        )
     print(f"wrote {out}")
     return 0

@@ -10,8 +10,8 @@ if __name__ == "__main__":  # python -m: Ctrl-C during the imports below exits 1
 import argparse
 import sys
 
-from zendar_dataset.cli.common import run_cli
-from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES
+from zendar_dataset.cli.common import run_cli, writing
+from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,12 +32,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--split", default=None, help="split of a dataset root (default: test when labelled, else val)"
     )
-    parser.add_argument("--out", default=None, help="directory for metrics.json (and plots); created if missing")
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="directory for metrics.json (and plots; problems.txt when the input has problems); created if "
+        "missing; never inside the --gt dataset",
+    )
     parser.add_argument("--plot", action="store_true", help="write PR curves per band as PNG into --out")
     parser.add_argument(
-        "--bootstrap", type=int, default=0, metavar="N", help="95%% confidence intervals from N scene resamples"
+        "--bootstrap",
+        type=int,
+        default=0,
+        metavar="N",
+        help=f"95%% confidence intervals from N scene resamples (at most {MAX_BOOTSTRAP_RESAMPLES:,})",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed for --bootstrap (default 0)")
+    parser.add_argument("--seed", type=int, default=0, help="seed (0 or more) for --bootstrap (default 0)")
     parser.add_argument(
         "--partial", action="store_true", help="evaluate only the frames present in the predictions"
     )
@@ -50,28 +59,54 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _refuse_output_into_inputs(args: argparse.Namespace) -> None:
+    """--out must not be inside a dataset given as --gt, nor make an input file one of its outputs."""
+    import os
+
+    from zendar_dataset.eval.report import OUTPUT_NAMES
+    from zendar_dataset.output_location import refuse_output_inside
+
+    gt_is_dataset = os.path.isdir(args.gt)
+    refuse_output_inside(args.out, datasets=(args.gt,) if gt_is_dataset else (), what="--out")
+    inputs = (args.predictions,) if gt_is_dataset else (args.predictions, args.gt)
+    for name in OUTPUT_NAMES:
+        refuse_output_inside(os.path.join(args.out, name), files=inputs, what="--out")
+
+
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help stays fast (numba, matplotlib).
+    from zendar_dataset.errors import PredictionsError
     from zendar_dataset.eval.evaluate import evaluate
-    from zendar_dataset.eval.report import format_table, write_metrics
+    from zendar_dataset.eval.report import format_table, prepare_out_dir, write_metrics, write_problems
 
-    metrics = evaluate(
-        args.predictions,
-        args.gt,
-        partial=args.partial,
-        bootstrap=args.bootstrap,
-        seed=args.seed,
-        split=args.split,
-        max_bytes=args.max_bytes,
-    )
+    if args.out is not None:
+        _refuse_output_into_inputs(args)
+        with writing(args.out):
+            prepare_out_dir(args.out)
+    try:
+        metrics = evaluate(
+            args.predictions,
+            args.gt,
+            partial=args.partial,
+            bootstrap=args.bootstrap,
+            seed=args.seed,
+            split=args.split,
+            max_bytes=args.max_bytes,
+        )
+    except PredictionsError as exc:
+        if args.out is not None:
+            with writing(args.out):
+                exc.problems_file = str(write_problems(exc.problems, args.out))
+        raise
     print(format_table(metrics))
     if args.out is not None:
-        print(f"wrote {write_metrics(metrics, args.out)}")
-        if args.plot:
-            from zendar_dataset.eval.render import plot_pr_curves
+        with writing(args.out):
+            print(f"wrote {write_metrics(metrics, args.out)}")
+            if args.plot:
+                from zendar_dataset.eval.render import plot_pr_curves
 
-            for path in plot_pr_curves(metrics, args.out):
-                print(f"wrote {path}")
+                for path in plot_pr_curves(metrics, args.out):
+                    print(f"wrote {path}")
     return 0
 
 
@@ -80,8 +115,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.plot and args.out is None:
         parser.error("--plot needs --out DIR to write the PNG files into")
-    if args.bootstrap < 0:
-        parser.error("--bootstrap must be 0 or more")
+    if not 0 <= args.bootstrap <= MAX_BOOTSTRAP_RESAMPLES:
+        parser.error(f"--bootstrap must be between 0 and {MAX_BOOTSTRAP_RESAMPLES:,}, got {args.bootstrap}")
+    if args.seed < 0:
+        parser.error(f"--seed must be 0 or more, got {args.seed}")
     if args.max_bytes <= 0:
         parser.error("--max-bytes must be positive")
     return run_cli(lambda: _run(args))

@@ -18,6 +18,7 @@ from zendar_dataset.eval.matching import UNMATCHED, match_and_band
 from zendar_dataset.eval.protocol import (
     BANDS_M,
     DEFAULT_MAX_BYTES,
+    MAX_BOOTSTRAP_RESAMPLES,
     MAX_PR_CURVE_POINTS,
     in_band,
     protocol_dict,
@@ -211,6 +212,16 @@ def score_tables(
     return metrics
 
 
+def _count_argument(name: str, value: Any, low: int, high: int | None) -> int:
+    """``value`` as an int in ``[low, high]`` (numpy integers accepted, bool refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ZendarError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
+    if value < low or (high is not None and value > high):
+        bounds = f"between {low:,} and {high:,}" if high is not None else f"{low} or more"
+        raise ZendarError(f"{name} must be {bounds}, got {value}")
+    return int(value)
+
+
 def evaluate(
     predictions: Any,
     ground_truth: Any,
@@ -232,9 +243,10 @@ def evaluate(
     partial
         Evaluate only the frames present in the predictions (say so in the output).
     bootstrap
-        Number of scene resamples for 95% confidence intervals (0: none).
+        Number of scene resamples for 95% confidence intervals (0: none; at most
+        ``MAX_BOOTSTRAP_RESAMPLES``).
     seed
-        Seed for the resampling.
+        Seed for the resampling (0 or more).
     split
         Split of a dataset root (default: ``test`` when labelled, else ``val``).
     max_bytes
@@ -251,6 +263,8 @@ def evaluate(
     ------
     PredictionsError
         Listing every problem found in either input.
+    ZendarError
+        For an argument out of range (``bootstrap``, ``seed``, ``max_bytes``).
 
     Examples
     --------
@@ -259,8 +273,9 @@ def evaluate(
     >>> evaluate(preds, gt)["ap"]
     {'near': 1.0, 'mid': None, 'far': None, 'all': 1.0}
     """
-    if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or bootstrap < 0:
-        raise PredictionsError(f"bootstrap must be a non-negative integer, got {bootstrap!r}")
+    bootstrap = _count_argument("bootstrap", bootstrap, 0, MAX_BOOTSTRAP_RESAMPLES)
+    seed = _count_argument("seed", seed, 0, None)
+    max_bytes = _count_argument("max_bytes", max_bytes, 1, None)
     pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
     pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
     gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)

@@ -38,6 +38,10 @@ DEFAULT_MAX_BYTES = 1_000_000_000
 #: thinned evenly (first and last points kept). AP is always computed on the full curve.
 MAX_PR_CURVE_POINTS = 10_000
 
+#: Most resamples ``--bootstrap N`` accepts: the percentile interval is settled long before, and the
+#: resample draws (N × scenes int64) stay within memory.
+MAX_BOOTSTRAP_RESAMPLES = 100_000
+
 #: Bootstrap confidence level for ``--bootstrap N`` (percentile interval over scene resamples).
 BOOTSTRAP_CONFIDENCE = 0.95
 

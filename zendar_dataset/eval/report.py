@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
-from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.temporary_files import remove_stale_temporaries, remove_temporary, temporary_sibling
 
 METRICS_FILENAME = "metrics.json"
+PROBLEMS_FILENAME = "problems.txt"
+#: Every file ``zendar-eval --out DIR`` may write into DIR.
+OUTPUT_NAMES = (METRICS_FILENAME, PROBLEMS_FILENAME, *(f"pr_{band}.png" for band in BANDS_M))
 
 
 def _percent(value: float | None) -> str:
@@ -72,24 +75,41 @@ def format_table(metrics: dict[str, Any]) -> str:
 
 
 def write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary name beside ``path``, then rename it into place."""
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    """Write ``data`` to a temporary name beside ``path``, then rename it into place.
+
+    The file is created with mode 0o666 minus the umask, like any file the user creates; stale
+    temporaries of ``path`` left by a killed run are removed first (temporary_files.py).
+    """
+    remove_stale_temporaries(path.parent, path.name)
+    temp = temporary_sibling(path)
     try:
-        with os.fdopen(descriptor, "wb") as handle:
+        with open(temp, "xb") as handle:
             handle.write(data)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+        os.replace(temp, path)
+    finally:
+        remove_temporary(temp)
 
 
 def prepare_out_dir(out_dir: str | os.PathLike) -> Path:
-    """Create ``out_dir`` (and parents) unless it exists; refuse a path that is a file."""
+    """Create ``out_dir`` (and parents) unless it exists.
+
+    Raises
+    ------
+    NotADirectoryError
+        When ``out_dir`` (or a parent) exists and is not a directory; nothing is touched.
+    """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise ZendarError(f"--out {str(out)!r} exists and is not a directory")
+        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a directory", str(out))
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def write_problems(problems: list[str], out_dir: str | os.PathLike) -> Path:
+    """Write every problem, one per line, to ``out_dir/problems.txt`` (atomic); returns the path."""
+    path = prepare_out_dir(out_dir) / PROBLEMS_FILENAME
+    write_atomically(path, "".join(f"{problem}\n" for problem in problems).encode("utf-8"))
+    return path
 
 
 def write_metrics(metrics: dict[str, Any], out_dir: str | os.PathLike) -> Path:

@@ -29,6 +29,11 @@ GROUND_TRUTH_REQUIRED = ("x", "y")
 _NUMBER_TYPES = frozenset({float, int})
 
 
+def _is_number_type(kind: type) -> bool:
+    """int, float and numpy's integer and floating scalars (an API caller's values); never bool."""
+    return kind in _NUMBER_TYPES or (issubclass(kind, (np.integer, np.floating)) and kind is not np.bool_)
+
+
 @dataclass(frozen=True)
 class DetectionTable:
     """Detections of many frames as flat columns.
@@ -163,6 +168,8 @@ def load_document(
         return None, [f"{what} file {str(path)!r} is not JSON text: {exc}"]
     except json.JSONDecodeError as exc:
         return None, [f"{what} file {str(path)!r} is not valid JSON: {exc}"]
+    except ValueError as exc:  # an integer literal longer than Python converts (4300 digits by default)
+        return None, [f"{what} file {str(path)!r} holds a number that cannot be read: {exc}"]
     except RecursionError:
         return None, [f"{what} file {str(path)!r} is nested too deeply to be a {what} file"]
 
@@ -178,7 +185,7 @@ def _short(value: Any) -> str:
 
 def _number_problem(value: Any) -> str | None:
     """Why ``value`` is not a finite JSON number, or None when it is one."""
-    if type(value) not in _NUMBER_TYPES:  # bool is a subclass of int and is refused here
+    if not _is_number_type(type(value)):  # bool is a subclass of int and is refused here
         return f"must be a number, got {_type_name(value)} {_short(value)}"
     try:
         as_float = float(value)
@@ -213,7 +220,7 @@ def _detection_problems(
 
 def _number_column(values: list[Any]) -> np.ndarray | None:
     """float64 (N,) of ``values``, or None if any is not an int or float (bool is refused) or overflows."""
-    if not set(map(type, values)) <= _NUMBER_TYPES:
+    if not all(map(_is_number_type, set(map(type, values)))):
         return None
     try:
         return np.fromiter(values, dtype=np.float64, count=len(values))

@@ -10,16 +10,16 @@ from __future__ import annotations
 
 import os
 import pathlib
-import shutil
-import uuid
 from typing import Any
 
 import numpy as np
 
+from zendar_dataset import temporary_files as temporary
 from zendar_dataset.format import stores
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON
 from zendar_dataset.format.writer import write_json_atomic
+from zendar_dataset.output_location import refuse_output_inside
 
 _TO = {"zarr": "zarr", "hdf5": "hdf5", "h5": "hdf5"}
 # Rows copied per read for arrays not stored one frame per chunk (bounds memory).
@@ -65,6 +65,7 @@ def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str) -> 
                 stores.write_attrs(target.root.require_group(path), stores.read_attrs(node))
             else:
                 _copy_array(node, target.root, path)
+                target.raise_if_failed()  # disk full: stop now, not after copying the rest into the void
     finally:
         target.close()
     if backend == "zarr":
@@ -93,11 +94,13 @@ def convert_dataset(
         raise ValueError(f"to: expected 'zarr' or 'hdf5', found {to!r}")
     backend = _TO[to]
     out = pathlib.Path(out)
+    refuse_output_inside(out, datasets=(root,), what="OUT")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise FileExistsError(f"{out}: output exists and is not an empty directory; choose a new path")
     index = open_dataset(root, storage_options)
     out.parent.mkdir(parents=True, exist_ok=True)
-    temp = out.parent / f".{out.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    temporary.remove_stale_temporaries(out.parent, out.name)  # left by a killed conversion
+    temp = temporary.temporary_sibling(out)
     (temp / "scenes").mkdir(parents=True)
     try:
         scenes = {}
@@ -111,7 +114,8 @@ def convert_dataset(
         if out.exists():
             out.rmdir()  # empty, checked above
         os.replace(temp, out)
+        temporary.forget(temp)
     except BaseException:
-        shutil.rmtree(temp, ignore_errors=True)
+        temporary.remove_temporary(temp)
         raise
     return out

@@ -9,6 +9,7 @@ frame at the frame's timestamp (metres, radians, m/s).
 from __future__ import annotations
 
 import os
+import errno
 import pathlib
 
 import numpy as np
@@ -18,6 +19,7 @@ from zendar_dataset.format.reader import SceneReader, open_dataset
 from zendar_dataset.format.schema import CAR_FIELDS, LABELS, frame_id
 from zendar_dataset.format.writer import write_json_atomic
 
+from zendar_dataset.output_location import refuse_output_inside
 
 def scene_ground_truth(scene: SceneReader) -> dict[str, list[dict]] | None:
     """Cars per frame of one scene, or None when its labels are withheld."""
@@ -76,11 +78,29 @@ def export_ground_truth(
     overwrite: bool = False,
     storage_options: dict | None = None,
 ) -> int:
-    """Write ``{"frames": ...}`` of ``split`` to ``out_path`` atomically; returns the number of frames."""
+    """Write ``{"frames": ...}`` of ``split`` to ``out_path`` atomically; returns the number of frames.
+
+    Raises
+    ------
+    ZendarError
+        When ``out_path`` is inside the dataset ``root`` (links resolved).
+    FileExistsError
+        When ``out_path`` exists and ``overwrite`` is false.
+    IsADirectoryError, NotADirectoryError
+        When ``out_path`` is a directory, or a parent of it is a file.
+    """
     out_path = pathlib.Path(out_path)
     if out_path.exists() and not overwrite:
-        raise FileExistsError(f"{out_path}: exists already (pass overwrite to replace it)")
+        raise FileExistsError(errno.EEXIST, "exists already (pass overwrite=True to replace it)", str(out_path))
     frames = ground_truth_frames(root, split, storage_options)
+    refuse_output_inside(out_path, datasets=(root,), what="output")
+    if out_path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(out_path))
     out_path.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out_path, {"frames": frames})
     return len(frames)
+    for parent in (out_path.parent, *out_path.parent.parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(parent))
+            break

@@ -32,6 +32,8 @@ import zarr
 import zarr.storage
 from zarr.codecs import BloscCodec, ZstdCodec
 
+from zendar_dataset.format.guarded_file import GuardedFile
+
 BACKENDS = ("zarr", "hdf5")
 SUFFIX_BACKEND = {".zarr": "zarr", ".h5": "hdf5", ".hdf5": "hdf5"}
 
@@ -88,11 +90,17 @@ class OpenStore:
     backend: str
     root: Any
     _closers: list = field(default_factory=list)
+    _guard: GuardedFile | None = None
+
+    def raise_if_failed(self) -> None:
+        """Raise the OS error of a failed write into the store (HDF5: held back from the library)."""
+        if self._guard is not None:
+            self._guard.raise_if_failed()
 
     def close(self) -> None:
-        for closer in reversed(self._closers):
-            closer()
-        self._closers.clear()
+        # Last first; each closer is dropped before it runs, so one that raises leaves the rest to a later close.
+        while self._closers:
+            self._closers.pop()()
 
 
 def create_store(path: pathlib.Path, backend: str) -> OpenStore:
@@ -101,8 +109,13 @@ def create_store(path: pathlib.Path, backend: str) -> OpenStore:
         root = zarr.open_group(zarr.storage.LocalStore(str(path)), mode="w-", zarr_format=3)
         return OpenStore(backend, root)
     if backend == "hdf5":
-        handle = h5py.File(path, "w-", libver=("earliest", "latest"))
-        return OpenStore(backend, handle, [handle.close])
+        guard = GuardedFile(path)
+        try:
+            handle = h5py.File(guard, "w-", libver=("earliest", "latest"))
+        except BaseException:
+            guard.close()
+            raise
+        return OpenStore(backend, handle, [guard.close, handle.close], guard)
     raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
 
 

@@ -16,13 +16,12 @@ from __future__ import annotations
 import json
 import os
 import pathlib
-import shutil
-import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from zendar_dataset import temporary_files as temporary
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import stores
 from zendar_dataset.format.calibration import CameraCalibration, Calibration, RadarCalibration
@@ -151,7 +150,8 @@ class SceneWriter:
         self._tracklog_written = False
         self._labels: dict[str, np.ndarray] | None = None
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._temp_path = self.path.parent / f".{self.path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        temporary.remove_stale_temporaries(self.path.parent, self.path.name)  # left by a killed writer
+        self._temp_path = temporary.temporary_sibling(self.path)
         self._store = stores.create_store(self._temp_path, self.backend)
         root = self._store.root
         stores.write_attrs(
@@ -226,6 +226,7 @@ class SceneWriter:
         n = stream.bulk.shape[0]
         stream.bulk.resize((n + 1, *frame.shape))
         stream.bulk[n] = frame
+        self._store.raise_if_failed()  # disk full: stop now, not after writing the rest into the void
 
     def append_radar(self, sensor: str, timestamp_ns: int, cube: np.ndarray) -> None:
         """Append a range-Doppler cube ``[R, D, A]`` complex64 stamped at the centre of its chirps."""
@@ -498,12 +499,13 @@ class SceneWriter:
         if self.path.exists():
             if not self.overwrite:
                 raise FileExistsError(f"{self.path}: a scene appeared while writing (pass overwrite=True to replace it)")
-            trash = self.path.parent / f".{self.path.name}.old-{uuid.uuid4().hex[:8]}"
+            trash = temporary.temporary_sibling(self.path)
             os.replace(self.path, trash)
             os.replace(self._temp_path, self.path)
-            _remove(trash)
+            temporary.remove_temporary(trash)
         else:
             os.replace(self._temp_path, self.path)
+        temporary.forget(self._temp_path)
 
     def abort(self) -> None:
         """Discard everything written: the temporary store is removed, the final path untouched."""
@@ -511,28 +513,22 @@ class SceneWriter:
         try:
             self._store.close()
         finally:
-            _remove(self._temp_path)
-
-
-def _remove(path: pathlib.Path) -> None:
-    if path.is_dir():
-        shutil.rmtree(path, ignore_errors=True)
-    elif path.exists():
-        path.unlink()
+            temporary.remove_temporary(self._temp_path)
 
 
 def write_json_atomic(path: pathlib.Path, value: Any) -> None:
     """Write JSON to ``path`` through a temporary sibling and an atomic rename."""
     path = pathlib.Path(path)
-    temp = path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    temporary.remove_stale_temporaries(path.parent, path.name)
+    temp = temporary.temporary_sibling(path)
     try:
-        with open(temp, "w", encoding="utf-8") as handle:
+        # "x": never through a file that appeared under the temporary name; created 0o666 & ~umask.
+        with open(temp, "x", encoding="utf-8") as handle:
             json.dump(value, handle, indent=1)
             handle.write("\n")
         os.replace(temp, path)
     finally:
-        if temp.exists():
-            temp.unlink()
+        temporary.remove_temporary(temp)
 
 
 class DatasetWriter:

@@ -25,7 +25,6 @@ import multiprocessing
 import numbers
 import os
 import pathlib
-import shutil
 import signal
 import sys
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -40,6 +39,7 @@ from zendar_dataset.format.writer import DatasetWriter, write_json_atomic
 from zendar_dataset.sim import ego as ego_model
 from zendar_dataset.sim.profiles import SimProfile, get_profile
 from zendar_dataset.sim.scene import build_scene, write_scene
+from zendar_dataset.temporary_files import remove_stale_temporaries
 
 SIDECAR = "simulation.json"
 GROUND_TRUTH_DIR = "ground_truth"
@@ -92,13 +92,8 @@ def _prepare_output(out: pathlib.Path, settings: dict) -> None:
 
 
 def _remove_interrupted(out: pathlib.Path) -> None:
-    """Delete temporary scene stores left by an interrupted run (hidden ``.<scene>.tmp-*`` entries)."""
-    scenes = out / "scenes"
-    if not scenes.is_dir():
-        return
-    for entry in scenes.iterdir():
-        if entry.name.startswith(".scene-") and ".tmp-" in entry.name:
-            shutil.rmtree(entry, ignore_errors=True) if entry.is_dir() else entry.unlink()
+    """Delete the temporary scene stores of writers that are gone (only this package's, see temporary_files.py)."""
+    remove_stale_temporaries(out / "scenes")
 
 
 class SceneSynthesisError(RuntimeError):
