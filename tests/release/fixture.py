@@ -105,21 +105,29 @@ def sar_frame(side: str, t_s: float, k: int) -> SarTruth:
     )
 
 
-def magnitude_buffer(i: int, j: int, rng: np.random.Generator) -> bytes:
-    """uint32 magnitudes as the SDK lays them out: flat index j*ROWS + i for pixel (i, j)."""
+def _flat(image: np.ndarray, row_major: bool) -> bytes:
+    # The SDK's layout: C order of (cols, rows), flat index j*ROWS + i for pixel (i, j).
+    return image.tobytes() if row_major else image.T.tobytes()
+
+
+def magnitude_buffer(i: int, j: int, rng: np.random.Generator, row_major: bool = False) -> bytes:
+    """uint32 magnitudes with one bright pixel (i, j)."""
     image = rng.integers(0, 10, size=(ROWS, COLS)).astype("<u4")
     image[i, j] = 50_000
-    return image.T.tobytes()  # C order of (cols, rows)
+    return _flat(image, row_major)
 
 
-def complex_buffer(i: int, j: int, rng: np.random.Generator) -> bytes:
+def complex_buffer(i: int, j: int, rng: np.random.Generator, row_major: bool = False) -> bytes:
     image = (rng.normal(size=(ROWS, COLS)) + 1j * rng.normal(size=(ROWS, COLS))).astype("<c8")
     image[i, j] = 3000 + 4000j
-    return image.T.tobytes()
+    return _flat(image, row_major)
 
 
-def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool = False) -> Truth:
-    """Write ``root/2020-02-03_2252/001/`` with every stream kind; returns what was written."""
+def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool = False, row_major: bool = False) -> Truth:
+    """Write ``root/2020-02-03_2252/001/`` with every stream kind; returns what was written.
+
+    ``row_major`` lays SAR pixels out as flat index i*COLS + j instead of the SDK's j*ROWS + i.
+    """
     rng = np.random.default_rng(7)
     scene = root / "2020-02-03_2252" / "001"
     truth = Truth()
@@ -134,10 +142,10 @@ def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool
             pos = enu_to_ecef(p_enu)
             i, j = frame.bright_ij
             if generation == "2020":
-                data = magnitude_buffer(i, j, rng)
+                data = magnitude_buffer(i, j, rng, row_major)
                 images.append(enc.image_2020(frame.timestamp_s, wxyz(R_ecef_imu), pos, k, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, ROWS, COLS, data))
             else:
-                data = complex_buffer(i, j, rng)
+                data = complex_buffer(i, j, rng, row_major)
                 images.append(enc.image_2021(frame.timestamp_s, wxyz(R_ecef_imu), pos, k, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, ROWS, COLS, data))
             points = [
                 enc.point(frame.timestamp_s, frame.target_ecef, 55.0, 10.5, -1.25, 0.1, 0.01, 17.0, 4.0 if generation == "2021" else None),

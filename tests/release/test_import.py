@@ -11,7 +11,7 @@ import pytest
 
 from tests.release import encoder as enc
 from tests.release.fixture import COLS, ROWS, SERIALS, T0_S, build_release
-from zendar_dataset.format import open_dataset
+from zendar_dataset.format import open_dataset, stores
 from zendar_dataset.format.validate import validate_dataset
 from zendar_dataset.geometry.frames import ecef_to_sar_pixel
 from zendar_dataset.release.records import gps_seconds_to_ns
@@ -49,18 +49,25 @@ def imported(request, tmp_path_factory):
     return request.param, src, root / "out", truth
 
 
-def test_imported_dataset_validates_and_loads(imported, capsys):
+def test_imported_dataset_validates(imported, capsys):
     _, _, out, _ = imported
     assert validate_dataset(out) == []
     status, stdout, _ = run("validate", out, capsys=capsys)
     assert status == 0, stdout
+
+
+def test_imported_dataset_loads_in_zendar_dataset(imported):
+    _, _, out, _ = imported
     from zendar_dataset import ZendarDataset
 
-    ds = ZendarDataset(out, split="val", streams=("radar", "sar", "tracklog", "lidar"), reference="sar")
+    ds = ZendarDataset(out, split="val", streams=("sar", "tracklog", "lidar"), reference="sar")
     assert len(ds) == 20
     item = ds[3]
     assert item["frame_id"].startswith("2020-02-03_2252_001/")
-    assert item["lidar"] is not None
+    assert item["lidar"] is not None and item["sar"]["left"]["image"].shape == (ROWS, COLS)
+    # Radar cubes exist for the first 0.2 s only: those SAR frames get one.
+    radar = ZendarDataset(out, split="val", streams=("radar", "sar"), reference="sar")
+    assert len(radar) == 3 and radar[1]["radar"]["left"]["cube"].shape == (1, 16, 8, 4)
 
 
 def test_streams_names_and_summary(imported):
@@ -71,13 +78,13 @@ def test_streams_names_and_summary(imported):
     base = "2020-02-03_2252/001/"
     assert kinds[base + "1739000J1Q_images.pbs"] == f"Image ({generation})"
     assert kinds[base + "1739000J2R_points.pbs"] == f"TrackerState ({generation})"
-    assert kinds[base + "lidar/lidar_00/stream.pbs"] == "LidarPointsFrame (2020)"
+    assert kinds[base + "lidar/00/stream.pbs"] == "LidarPointsFrame (2020)"
     framing = {s["path"]: s["framing"] for s in scene["streams"]}
-    assert framing[base + "lidar/lidar_00/stream.pbs"].startswith("no header" + (", gzip" if generation == "2021" else ""))
+    assert framing[base + "lidar/00/stream.pbs"].startswith("no header" + (", gzip" if generation == "2021" else ""))
     assert framing[base + "vn200.pbs"].startswith("8-byte header")
     text = " | ".join(scene["assumptions"])
     assert "serial 1739000J1Q -> 'left'" in text and "serial 1739000J2R -> 'right'" in text
-    assert "pixel (i, j) is flat element j*rows + i" in text
+    assert "pixel (i, j) is flat element j*rows + i (the SDK viewer's reading): checked" in text
     index = open_dataset(out)
     reader = index.open_scene("2020-02-03_2252_001")
     assert set(reader.sensors("sar")) == set(SERIALS.values())
@@ -101,9 +108,12 @@ def test_sar_pixels_land_at_origin_plus_i_di_plus_j_dj(imported):
             np.testing.assert_allclose(origin[m] + i * di[m] + j * dj[m], frame.target_ecef, atol=1e-6)
             image = np.abs(images[m])
             assert np.unravel_index(np.argmax(image), image.shape) == (i, j)
-        attrs = reader.group_attrs(f"sar/{side}") if hasattr(reader, "group_attrs") else None
-        if attrs is not None:
-            assert attrs["magnitude_only"] is (generation == "2020")
+        store = stores.open_store(out / "scenes" / "2020-02-03_2252_001.zarr")
+        try:
+            attrs = stores.read_attrs(stores.get_node(store.root, f"sar/{side}"))
+        finally:
+            store.close()
+        assert attrs["magnitude_only"] is (generation == "2020") and attrs["serial"] in SERIALS
 
 
 def _bright_pixel_at(reader, side, timestamp_ns, points_ecef):
@@ -181,3 +191,15 @@ def test_output_inside_source_is_refused(tmp_path, capsys):
     status, _, err = run("import-release", src, src / "out", capsys=capsys)
     assert status == 2 and "outside the release folder" in err
     assert sorted(p.name for p in src.iterdir()) == ["vn200.pbs"]
+
+
+def test_row_major_pixels_are_detected_from_known_points(tmp_path, capsys):
+    src = tmp_path / "release"
+    truth = build_release(src, row_major=True)
+    status, stdout, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0
+    assert "i*cols + j (row-major, NOT the SDK viewer's reading): checked" in stdout
+    reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
+    for m, frame in enumerate(truth.sar["right"][:5]):
+        image = np.abs(reader.array("sar/right/image")[m])
+        assert np.unravel_index(np.argmax(image), image.shape) == frame.bright_ij

@@ -27,6 +27,7 @@ from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import records as rec
 from zendar_dataset.release.discover import SceneSource, find_scenes
 from zendar_dataset.release.messages import RD_MODEL
+from zendar_dataset.release.pixel_order import vote_pixel_order
 from zendar_dataset.release.stream import ReleaseStream
 from zendar_dataset.release.wire import WireError, decode
 
@@ -368,7 +369,8 @@ class _SceneImport:
             if tracklog is not None:
                 out.write_tracklog(*tracklog)
             for serial, opened in images.items():
-                self._write_sar(out, rename(serial), serial, opened)
+                i_fastest = self._pixel_order(rename(serial), opened, points.get(serial), list(lidars.values()))
+                self._write_sar(out, rename(serial), serial, opened, i_fastest)
             for name, opened in rd_frames.items():
                 self._write_cubes(out, name, opened, models.get(name))
             for serial, opened in points.items():
@@ -421,14 +423,45 @@ class _SceneImport:
                 )
         return out
 
-    def _write_sar(self, out, name: str, serial: str, opened: _Opened) -> None:
+    def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
+        """Check the pixel order against this radar's detections and the lidar (see ``pixel_order.py``)."""
+        frames = []
+        for _, record in _decoded(opened, count=False):
+            frames.append(rec.sar_frame(opened.stream.kind, record))
+            if len(frames) >= 20:
+                break
+        probes = []
+        for source in ([points] if points else []) + lidars:
+            for offset, buf, start, end in _iter(source, count=False):
+                try:
+                    if source.stream.kind.name == "TrackerState":
+                        found = rec.detections(source.stream.kind, buf, start, end)
+                        probes.append((found.timestamp_s, found.columns["position_ecef"]))
+                    else:
+                        sweep = rec.lidar_sweep(source.stream.kind, buf, start, end)
+                        probes.append((sweep.timestamp_s, sweep.position_ecef))
+                except WireError:
+                    continue  # reported when the stream itself is imported
+                if len(probes) >= 200:
+                    break
+        i_fastest, evidence = vote_pixel_order(frames, probes)
+        if i_fastest is None:
+            self.summary.assumptions.append(
+                f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; not verifiable here: {evidence})"
+            )
+            return True
+        order = "j*rows + i (the SDK viewer's reading)" if i_fastest else "i*cols + j (row-major, NOT the SDK viewer's reading)"
+        self.summary.assumptions.append(f"sar/{name}: pixel (i, j) is flat element {order}: checked, {evidence}")
+        return i_fastest
+
+    def _write_sar(self, out, name: str, serial: str, opened: _Opened, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
         holds_seen = set()
         bad = {}
         for _, record in _decoded(opened):
             frame = rec.sar_frame(opened.stream.kind, record)
             try:
-                image, holds = rec.sar_pixels(frame)
+                image, holds = rec.sar_pixels(frame, i_fastest)
             except ValueError as exc:
                 bad[str(exc)] = bad.get(str(exc), 0) + 1
                 continue
@@ -448,7 +481,6 @@ class _SceneImport:
         magnitude_only = holds_seen == {"magnitude"}
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
         self.summary.assumptions += [
-            f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; i spans rows)",
             f"sar/{name}: " + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
             f"sar/{name}: aperture start/end are not in the release; aperture_ns = [t, t]",
         ]

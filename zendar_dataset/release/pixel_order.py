@@ -1,0 +1,86 @@
+"""Checking the SAR buffer's pixel order against points whose ECEF position is known.
+
+The release's pixel buffer is ``rows × cols`` values; which of the two
+flat orders holds pixel (i, j) is not stated (the SDK viewer reads flat
+element ``j·rows + i``).  Radar detections and lidar points carry ECEF
+positions: projected through the image model they should fall on bright
+pixels under the right reading, and on background under the wrong one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zendar_dataset.geometry.frames import ecef_to_sar_pixel
+from zendar_dataset.release.records import SarFrame, sar_pixels
+
+_MAX_FRAMES = 20
+_MAX_DT_S = 0.05
+_DECISIVE_RATIO = 2.0
+_MIN_POINTS = 5
+
+
+def _brightness(image: np.ndarray, i: np.ndarray, j: np.ndarray) -> float:
+    """Median magnitude at the points over the image's median magnitude."""
+    magnitude = np.abs(image)
+    background = float(np.median(magnitude)) or float(np.mean(magnitude)) or 1.0
+    return float(np.median(magnitude[i, j])) / background
+
+
+def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarray]]) -> tuple[bool | None, str]:
+    """Which flat order makes known ECEF points land on bright pixels.
+
+    Parameters
+    ----------
+    frames
+        SAR frames of one radar (the first ones are used).
+    probes
+        ``(GPS seconds, [P, 3] ECEF metres)`` point sets (detections, lidar sweeps).
+
+    Returns
+    -------
+    i_fastest : bool or None
+        True: flat element ``j·rows + i``; False: ``i·cols + j``; None: the evidence does not decide
+        (too few points in the images, square images with symmetric content, ...).
+    evidence : str
+        The brightness ratios measured, for the import summary.
+    """
+    if not probes:
+        return None, "no detections or lidar points to check against"
+    times = np.array([t for t, _ in probes])
+    log_ratio = 0.0
+    used = 0
+    for frame in frames[:_MAX_FRAMES]:
+        k = int(np.argmin(np.abs(times - frame.timestamp_s)))
+        if abs(times[k] - frame.timestamp_s) > _MAX_DT_S:
+            continue
+        points = probes[k][1]
+        points = points[np.all(np.isfinite(points), axis=1)]
+        if not points.size:
+            continue
+        try:
+            i, j, _ = ecef_to_sar_pixel(points, frame.origin_ecef, frame.di_ecef, frame.dj_ecef)
+        except ValueError:
+            continue
+        i, j = np.rint(i).astype(np.int64), np.rint(j).astype(np.int64)
+        inside = (i >= 0) & (i < frame.rows) & (j >= 0) & (j < frame.cols)
+        if not np.any(inside):
+            continue
+        try:
+            a, _ = sar_pixels(frame, i_fastest=True)
+            b, _ = sar_pixels(frame, i_fastest=False)
+        except ValueError:
+            continue
+        score_a = _brightness(a, i[inside], j[inside])
+        score_b = _brightness(b, i[inside], j[inside])
+        log_ratio += np.log(max(score_a, 1e-12) / max(score_b, 1e-12))
+        used += int(np.count_nonzero(inside))
+    if used < _MIN_POINTS:
+        return None, f"only {used} known points fell inside the images"
+    ratio = float(np.exp(log_ratio))
+    text = f"{used} known points are {ratio:.3g}x brighter under the SDK reading than row-major"
+    if ratio >= _DECISIVE_RATIO:
+        return True, text
+    if ratio <= 1 / _DECISIVE_RATIO:
+        return False, text
+    return None, text
