@@ -217,7 +217,7 @@ def ranking_page(
 
 
 def _pr_svg(curve: dict[str, list[float]], band: str) -> str:
-    size, pad = 220, 30
+    size, pad = 230, 34
     inner = size - 2 * pad
 
     def xy(recall: float, precision: float) -> str:
@@ -230,9 +230,14 @@ def _pr_svg(curve: dict[str, list[float]], band: str) -> str:
         f'<line x1="{pad + t * inner}" y1="{pad}" x2="{pad + t * inner}" y2="{pad + inner}" stroke="#e3e7eb"/>'
         for t in (0, 0.25, 0.5, 0.75, 1)
     )
+    ticks = "".join(
+        f'<text x="{pad + t * inner}" y="{pad + inner + 12}" font-size="10" text-anchor="middle" fill="#5b6470">{t:g}</text>'
+        f'<text x="{pad - 4}" y="{pad + (1 - t) * inner + 3}" font-size="10" text-anchor="end" fill="#5b6470">{t:g}</text>'
+        for t in (0, 0.5, 1)
+    )
     return (
         f'<svg width="{size}" height="{size}" viewBox="0 0 {size} {size}" role="img" '
-        f'aria-label="precision-recall curve, band {esc(band)}">{grid}'
+        f'aria-label="precision-recall curve, band {esc(band)}">{grid}{ticks}'
         f'<polyline points="{measured}" fill="none" stroke="#9fb3c8" stroke-width="1"/>'
         f'<polyline points="{envelope}" fill="none" stroke="#0b5cad" stroke-width="2"/>'
         f'<text x="{size / 2}" y="{size - 6}" font-size="11" text-anchor="middle" fill="#5b6470">recall</text>'
