@@ -237,3 +237,63 @@ def test_pool_replaces_a_small_free_slot_at_the_bound():
     assert big is not None and big.shape == (1024, 1024)
     assert pool.stats() == {"slots": 1, "leased": 1, "fallbacks": 0}
     assert pool.slots[0].capacity_bytes >= big.nbytes
+
+
+def test_received_slot_is_mapped_once_and_reused(monkeypatch):
+    # This process plays both sides: the worker's pool and the main process's mappings.
+    pool = shared_batches.WorkerBatchPool()
+    monkeypatch.setattr(shared_batches, "_POOL", pool)
+    monkeypatch.setattr(shared_batches, "_RECEIVED", {})
+    maps = []
+    real_mmap = shared_batches.mmap.mmap
+    # The receiving side maps with explicit flags (the pool's own slots do not).
+    monkeypatch.setattr(shared_batches.mmap, "mmap", lambda *a, **k: ("flags" in k and maps.append(a)) or real_mmap(*a, **k))
+
+    def send_and_receive(value):
+        rows = pool.buffer((2, 3), np.complex64, max_slots=1)
+        rows[...] = value
+        sent = ForkingPickler.dumps(pool.tensor([rows[0], rows[1]]))
+        del rows
+        gc.collect()
+        return pickle.loads(sent)
+
+    first = send_and_receive(1 + 2j)
+    assert len(maps) == 1 and len(shared_batches._RECEIVED) == 1
+    address = first.data_ptr()
+    del first
+    gc.collect()
+    second = send_and_receive(3 - 4j)  # the same slot, freed by the first batch's death
+    # The main side reused its mapping: no new mmap, the same address, the new bytes.
+    assert len(maps) == 1 and second.data_ptr() == address
+    assert torch.equal(second, torch.full((2, 3), 3 - 4j))
+    # While the batch lives the slot stays reserved, mapping or not.
+    assert pool.buffer((2, 3), np.complex64, max_slots=1) is None
+    del second
+    gc.collect()
+    assert pool.buffer((2, 3), np.complex64, max_slots=1) is not None
+
+
+def test_received_mappings_of_exited_or_replaced_slots_are_dropped(monkeypatch):
+    import subprocess
+    import sys
+
+    exited = subprocess.Popen([sys.executable, "-c", "pass"])
+    exited.wait()
+    mapping = lambda: shared_batches.mmap.mmap(-1, shared_batches.HEADER_BYTES)  # noqa: E731
+    received = {
+        ("dead", 1): shared_batches._ReceivedSlot(mapping(), exited.pid),
+        ("live", 1): shared_batches._ReceivedSlot(mapping(), 1),  # pid 1 lives as long as the machine
+        ("live", 2): shared_batches._ReceivedSlot(mapping(), 1),
+        ("live", 3): shared_batches._ReceivedSlot(mapping(), 1, in_use=True),
+    }
+    monkeypatch.setattr(shared_batches, "_RECEIVED", dict(received))
+    # A worker (pid 1) that now has 2 slots: its oldest received slot is one it replaced.
+    shared_batches._prune_received(1, 2)
+    assert list(shared_batches._RECEIVED) == [("live", 2), ("live", 3)]
+    # Forgotten while in use, a mapping still hands its slot back when its batch dies.
+    slot = received[("live", 3)]
+    shared_batches._prune_received(1, 0)
+    assert shared_batches._RECEIVED == {}
+    slot.mapping[0] = shared_batches.BUSY
+    slot.release()
+    assert slot.mapping[0] == shared_batches.FREE and not slot.in_use
