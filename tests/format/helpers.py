@@ -9,6 +9,7 @@ import json
 import pathlib
 import warnings
 
+import google_crc32c
 import h5py
 import numpy as np
 import zarr
@@ -67,16 +68,40 @@ def reconsolidate(path: pathlib.Path) -> None:
             zarr.consolidate_metadata(str(path))
 
 
+def crc32c_hex(data: np.ndarray, rows_per_chunk: int) -> str:
+    """The chunk_crc32c attribute of ``data`` chunked ``rows_per_chunk`` rows at a time (whole other axes)."""
+    data = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
+    return "".join(
+        f"{google_crc32c.value(data[start : start + rows_per_chunk].tobytes()):08x}"
+        for start in range(0, data.shape[0], rows_per_chunk)
+    )
+
+
+def chunk_rows(path: pathlib.Path, array_path: str) -> int:
+    """Rows per chunk of an array (the writer chunks along the first axis only)."""
+    root = open_raw(path)
+    try:
+        return int(root[array_path].chunks[0])
+    finally:
+        if isinstance(root, h5py.File):
+            root.close()
+
+
 def replace_array(path: pathlib.Path, array_path: str, data: np.ndarray | None) -> None:
-    """Delete an array and (unless data is None) write ``data`` in its place."""
+    """Delete an array and (unless data is None) write ``data`` in its place, with its chunk checksums,
+    as a careful tool would: frame arrays (``cube``, ``image``) one row per chunk, others in one chunk."""
     root = open_raw(path, "r+" if pathlib.Path(path).suffix == ".h5" else "a")
     try:
         del root[array_path]
         if data is not None:
+            rows = 1 if array_path.rsplit("/", 1)[-1] in ("cube", "image") else max(1, data.shape[0])
+            chunks = (rows, *data.shape[1:])
             if isinstance(root, h5py.File):
-                root.create_dataset(array_path, data=data)
+                node = root.create_dataset(array_path, data=data, chunks=chunks)
             else:
-                root.create_array(array_path, data=data)
+                node = root.create_array(array_path, shape=data.shape, dtype=data.dtype, chunks=chunks)
+                node[...] = data
+            node.attrs["chunk_crc32c"] = crc32c_hex(data, rows)
     finally:
         if isinstance(root, h5py.File):
             root.close()

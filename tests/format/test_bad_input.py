@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, T0_NS, A, D, R, make_calibration
+from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, T0_NS, A, D, R, make_calibration, make_dataset
 from tests.format.helpers import corrupt_chunk, replace_array, set_attr
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import FORMAT_NAME, FORMAT_VERSION, SceneReader, SceneWriter, open_dataset
@@ -63,11 +63,15 @@ def test_non_increasing_timestamps(dataset_root, backend):
         scene.timestamps("camera/front")
 
 
-def test_truncated_chunk_zarr(dataset_root, backend):
-    if backend != "zarr":
-        pytest.skip("zarr chunk files")
+@pytest.fixture
+def zarr_root(tmp_path):
+    return make_dataset(tmp_path / "ds-zarr", "zarr")
+
+
+def test_truncated_chunk_zarr(zarr_root):
+    dataset_root = zarr_root
     for array_path in ("radar/left/cube", "camera/front/image"):  # raw and compressed chunks
-        corrupt_chunk(_scene_path(dataset_root, "s0", backend), array_path, 2)
+        corrupt_chunk(_scene_path(dataset_root, "s0", "zarr"), array_path, 2)
         scene = open_dataset(dataset_root).open_scene("s0")
         scene.array(array_path)[1]  # other chunks still read
         for key in (2, slice(1, 3), (2, 0)):
@@ -75,12 +79,17 @@ def test_truncated_chunk_zarr(dataset_root, backend):
                 scene.array(array_path)[key]
 
 
-def test_missing_chunk_is_an_error_not_zeros(dataset_root, backend):
-    if backend != "zarr":
-        pytest.skip("zarr chunk files")
-    (_scene_path(dataset_root, "s0", backend) / "radar/left/cube/c/1/0/0/0").unlink()
+def test_missing_chunk_is_an_error_not_zeros(zarr_root):
+    """The store records checksums, so a chunk that is not stored is an error, not the fill value."""
+    scene_path = _scene_path(zarr_root, "s0", "zarr")
+    (scene_path / "radar/left/cube/c/1/0/0/0").unlink()
+    (scene_path / "camera/front/image/c/2/0/0/0").unlink()  # compressed: read through zarr, not directly
+    scene = open_dataset(zarr_root).open_scene("s0")
     with pytest.raises(ZendarFormatError, match="s0: radar/left/cube: .* chunk of frame 1 is missing"):
-        open_dataset(dataset_root).open_scene("s0").array("radar/left/cube")[1]
+        scene.array("radar/left/cube")[1]
+    with pytest.raises(ZendarFormatError, match=r"s0: camera/front/image: expected every chunk stored .*found chunk \[2, 0, 0, 0\] missing"):
+        scene.array("camera/front/image")[1:3]
+    assert scene.array("camera/front/image")[1].shape == (CAM_H, CAM_W, 3)
 
 
 def test_corrupt_and_truncated_hdf5(tmp_path):
@@ -150,14 +159,12 @@ def test_scene_id_mismatch_and_missing_store(dataset_root, backend):
     assert "s2: expected a scene store at" in str(_open_error(dataset_root, "s2"))
 
 
-def test_validate_reports_stale_consolidated_metadata(dataset_root, backend):
-    if backend != "zarr":
-        pytest.skip("zarr consolidated metadata")
+def test_validate_reports_stale_consolidated_metadata(zarr_root):
     import zarr
 
     from zendar_dataset.format.validate import validate_scene
 
-    path = _scene_path(dataset_root, "s0", backend)
+    path = _scene_path(zarr_root, "s0", "zarr")
     group = zarr.open_group(str(path), mode="a", use_consolidated=False)
     del group["camera"]  # edited without refreshing the consolidated metadata
     problems = validate_scene(path, "s0")

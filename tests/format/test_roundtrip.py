@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import pickle
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.format.conftest import CAM_H, CAM_W, ENU_ORIGIN, SAR_H, SAR_W, T0_NS, A, D, R, make_calibration
-from tests.format.helpers import dump
+from tests.format.helpers import chunk_rows, crc32c_hex, dump
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import Calibration, DatasetWriter, SceneReader, SceneWriter, open_dataset
 
@@ -69,8 +70,15 @@ def test_scene_round_trip_is_bit_identical(tmp_path, suffix):
         stored = arrays[name]
         assert stored.dtype == np.asarray(value).dtype.newbyteorder("=") or name.endswith("offsets"), name
         assert stored.tobytes() == np.ascontiguousarray(value, dtype=stored.dtype).tobytes(), name
-    assert stored.dtype == np.int64
-    assert attrs[""] == {"scene_id": "scene-a", "time_reference": "gps", "enu_origin": ENU_ORIGIN}
+    assert arrays["lidar/top/offsets"].dtype == np.int64
+    assert attrs[""] == {
+        "scene_id": "scene-a", "time_reference": "gps", "enu_origin": ENU_ORIGIN, "chunk_checksums": "crc32c"
+    }
+    # Every array records the CRC-32C of each chunk's values, computed here from the values written.
+    for name, value in expected.items():
+        rows = chunk_rows(path, name)
+        assert attrs[name]["chunk_crc32c"] == crc32c_hex(np.asarray(value, dtype=arrays[name].dtype), rows), name
+    assert len(attrs["lidar/top/points"]["chunk_crc32c"]) == 2 * 8  # 70 005 rows: two chunks of 65 536
     assert attrs["calibration"]["calibration"] == Calibration.from_json(make_calibration()).to_json()
 
     scene = SceneReader(path)
@@ -186,8 +194,9 @@ def test_unreadable_rx_positions_are_a_problem_not_a_crash(rx_positions_m, found
 def test_calibration_json_round_trip():
     calibration = Calibration.from_json(make_calibration())
     again = Calibration.from_json(calibration.to_json())
-    assert again.to_json() == calibration.to_json() == Calibration.from_json(json_text := __import__("json").dumps(make_calibration())).to_json()
-    assert json_text
+    from_text = Calibration.from_json(json.loads(json.dumps(make_calibration())))
+    assert again.to_json() == calibration.to_json() == from_text.to_json()
+    assert again.to_json()["sensors"]["left"]["rx_positions_m"] == make_calibration()["sensors"]["left"]["rx_positions_m"]
     assert type(again.sensors["front"]).__name__ == "CameraCalibration" and again.camera("front").width == CAM_W
     with pytest.raises(ZendarFormatError, match="expected radar calibration for sensor 'front'"):
         again.radar("front")

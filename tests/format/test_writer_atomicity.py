@@ -9,7 +9,7 @@ import pytest
 
 from tests.format.conftest import ENU_ORIGIN, T0_NS, A, D, R, make_calibration, write_scene
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import DatasetWriter, SceneWriter, open_dataset
+from zendar_dataset.format import DatasetWriter, SceneReader, SceneWriter, open_dataset
 
 
 class Interrupted(Exception):
@@ -65,9 +65,6 @@ def test_existing_scene_is_not_replaced_without_overwrite(tmp_path, backend):
                 SceneWriter(path, "x", enu_origin=ENU_ORIGIN, calibration=make_calibration())
         with SceneWriter(path, "x", enu_origin=ENU_ORIGIN, calibration=make_calibration(), overwrite=value == 2) as writer:
             writer.append_radar("left", T0_NS, np.full((R, D, A), value, np.complex64))
-    scene = open_dataset  # noqa: F841 (reader import kept for symmetry)
-    from zendar_dataset.format import SceneReader
-
     assert SceneReader(path).array("radar/left/cube")[0][0, 0, 0] == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
 

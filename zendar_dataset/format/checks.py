@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import stores
+from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.calibration import CameraCalibration, Calibration, RadarCalibration
 from zendar_dataset.format.schema import (
     CALIBRATION_ATTR,
     CALIBRATION_GROUP,
     ENU_ORIGIN_KEYS,
     EXTRA_SENSOR_GROUPS,
+    LABEL_OPTIONAL_FIELDS,
     LABELS,
     SENSOR_GROUPS,
     TIME_REFERENCE,
@@ -27,6 +28,14 @@ from zendar_dataset.format.schema import (
     expected_first_dim,
     stream_specs,
 )
+
+
+# Arrays stored one frame per chunk: (stream group, array name).
+FRAME_CHUNKED = {("radar", "cube"), ("sar", "image"), ("camera", "image")}
+# Claimed sizes beyond these are taken for corrupt metadata, not read: a scene of
+# 20 Hz radar for 100 hours has 7.2 million chunks per stream.
+MAX_CHUNKS = 2**24
+MAX_ARRAY_BYTES = 2**40
 
 
 @dataclass
@@ -39,18 +48,41 @@ class SceneMetadata:
     calibration_json: dict | None = None
     attrs: dict = field(default_factory=dict)
     streams: list[str] = field(default_factory=list)
+    records_checksums: bool = False
+    arrays: dict[str, Any] = field(default_factory=dict)  # path -> array whose metadata passed every check
 
 
 def _shape_text(shape: tuple) -> str:
     return "[" + ", ".join(str(int(n)) for n in shape) + "]"
 
 
+def get_node(root: Any, scene: str, path: str, problems: list[str]) -> Any | None:
+    """The node at ``path``, or None when it is absent or its metadata is unreadable (a problem noted)."""
+    try:
+        return stores.get_node(root, path)
+    except stores.MetadataError as exc:
+        problems.append(f"{scene}: {exc}")
+        return None
+
+
 def check_array(
-    root: Any, scene: str, stream: str, spec: ArraySpec, n_elements: int | None, problems: list[str]
+    root: Any,
+    scene: str,
+    stream: str,
+    spec: ArraySpec,
+    n_elements: int | None,
+    problems: list[str],
+    checksummed: bool = False,
 ) -> Any | None:
-    """Check one array's presence, dtype and shape; returns the array when they are right."""
+    """Check one array's presence, dtype, shape, chunking and checksum attribute.
+
+    Returns the array when all are right (its data can then be read safely), else None.
+    """
     path = f"{stream}/{spec.name}"
-    node = stores.get_node(root, path)
+    count = len(problems)
+    node = get_node(root, scene, path, problems)
+    if len(problems) > count:
+        return None
     if node is None or not stores.is_array(node):
         found = "a group" if node is not None else "nothing"
         problems.append(f"{scene}: {path}: expected an array {spec.describe()}, found {found}")
@@ -75,19 +107,51 @@ def check_array(
             f"found {_shape_text(shape)}"
         )
         ok = False
-    return node if ok else None
+    return node if ok and _check_storage(node, scene, stream, spec, problems, checksummed) else None
 
 
-def check_stream(root: Any, scene: str, stream: str, problems: list[str]) -> dict[str, Any]:
+def _check_storage(node: Any, scene: str, stream: str, spec: ArraySpec, problems: list[str], checksummed: bool) -> bool:
+    """Chunking and checksum attribute of an array whose dtype and shape are right."""
+    path = f"{stream}/{spec.name}"
+    shape = tuple(int(n) for n in node.shape)
+    chunks = stores.chunk_shape(node) or shape
+    n_chunks = checksums.chunk_count(shape, chunks)
+    n_bytes = int(np.prod(shape, dtype=object)) * np.dtype(node.dtype).itemsize
+    if n_chunks > MAX_CHUNKS or n_bytes > MAX_ARRAY_BYTES:
+        problems.append(
+            f"{scene}: {path}: expected a plausible size (at most {MAX_CHUNKS} chunks and {MAX_ARRAY_BYTES} bytes), "
+            f"found shape {_shape_text(shape)} in {n_chunks} chunks ({n_bytes} bytes); the metadata is likely corrupt"
+        )
+        return False
+    ok = True
+    if (stream.split("/", 1)[0], spec.name) in FRAME_CHUNKED and shape and chunks != (1, *shape[1:]):
+        problems.append(f"{scene}: {path}: expected one chunk per frame {[1, *shape[1:]]}, found chunks {list(chunks)}")
+        ok = False
+    if checksummed:
+        try:
+            checksums.decode(stores.read_attrs(node).get(checksums.ARRAY_ATTR), n_chunks)
+        except ValueError as exc:
+            problems.append(f"{scene}: {path}: attribute {checksums.ARRAY_ATTR}: {exc}")
+            ok = False
+    return ok
+
+
+def check_stream(root: Any, scene: str, stream: str, problems: list[str], checksummed: bool = False) -> dict[str, Any]:
     """Check every array of one stream; returns the arrays that passed, by name."""
     specs = stream_specs(stream)
-    timestamps = check_array(root, scene, stream, specs[0], None, problems)
+    timestamps = check_array(root, scene, stream, specs[0], None, problems, checksummed)
     n = int(timestamps.shape[0]) if timestamps is not None else None
     arrays = {specs[0].name: timestamps} if timestamps is not None else {}
     for spec in specs[1:]:
-        node = check_array(root, scene, stream, spec, n, problems)
+        node = check_array(root, scene, stream, spec, n, problems, checksummed)
         if node is not None:
             arrays[spec.name] = node
+    if stream == LABELS:
+        for spec in LABEL_OPTIONAL_FIELDS:
+            if stores.get_node(root, f"{stream}/{spec.name}") is not None:
+                node = check_array(root, scene, stream, spec, n, problems, checksummed)
+                if node is not None:
+                    arrays[spec.name] = node
     return arrays
 
 
@@ -112,10 +176,19 @@ def _check_attrs(root: Any, scene: str, expected_scene_id: str | None, meta: Sce
         problems.append(f"{scene}: /: expected attribute enu_origin with numeric values, found {origin}")
     else:
         meta.enu_origin = {k: float(origin[k]) for k in ENU_ORIGIN_KEYS}
+    algorithm = attrs.get(checksums.ROOT_ATTR)
+    if algorithm is not None and algorithm != checksums.ALGORITHM:
+        problems.append(
+            f"{scene}: /: expected attribute {checksums.ROOT_ATTR} {checksums.ALGORITHM!r} or none, found {algorithm!r}"
+        )
+    meta.records_checksums = algorithm == checksums.ALGORITHM
 
 
 def _check_calibration(root: Any, scene: str, meta: SceneMetadata, problems: list[str]) -> None:
-    group = stores.get_node(root, CALIBRATION_GROUP)
+    count = len(problems)
+    group = get_node(root, scene, CALIBRATION_GROUP, problems)
+    if len(problems) > count:
+        return
     if group is None or not stores.is_group(group):
         problems.append(f"{scene}: {CALIBRATION_GROUP}: expected a group with attribute {CALIBRATION_ATTR!r}, found nothing")
         return
@@ -183,7 +256,7 @@ def check_scene_metadata(root: Any, scene: str, expected_scene_id: str | None = 
     _check_attrs(root, scene, expected_scene_id, meta, problems)
     _check_calibration(root, scene, meta, problems)
     for group in SENSOR_GROUPS + EXTRA_SENSOR_GROUPS:
-        node = stores.get_node(root, group)
+        node = get_node(root, scene, group, problems)
         if node is None:
             continue
         if not stores.is_group(node):
@@ -191,12 +264,14 @@ def check_scene_metadata(root: Any, scene: str, expected_scene_id: str | None = 
             continue
         for sensor in stores.member_names(node):
             stream = f"{group}/{sensor}"
-            arrays = check_stream(root, scene, stream, problems)
+            arrays = check_stream(root, scene, stream, problems, meta.records_checksums)
+            meta.arrays.update({f"{stream}/{name}": node for name, node in arrays.items()})
             _check_sensor_calibration(meta, scene, stream, arrays, problems)
             meta.streams.append(stream)
     for stream in (TRACKLOG, LABELS):
-        if stores.get_node(root, stream) is not None:
-            check_stream(root, scene, stream, problems)
+        if get_node(root, scene, stream, problems) is not None:
+            arrays = check_stream(root, scene, stream, problems, meta.records_checksums)
+            meta.arrays.update({f"{stream}/{name}": node for name, node in arrays.items()})
             meta.streams.append(stream)
     if TRACKLOG in meta.streams and meta.calibration is not None and "imu" not in meta.calibration.sensors:
         problems.append(f"{scene}: {CALIBRATION_GROUP}: expected an entry for sensor 'imu' (tracklog), found none")

@@ -1,7 +1,10 @@
 """Lossless conversion of a dataset between the zarr and HDF5 backends.
 
 Every array is copied bit for bit with the same chunk shape, every attribute
-with an equal value; only the container and its compressors change.  The
+with an equal value; only the container and its compressors change.  Chunk
+checksums (docs/format.md) are recomputed from the values copied and, where
+the source records them, must match: a corrupt source is refused, not
+carried over.  Every converted store records checksums.  The
 output is written under a temporary sibling and renamed into place, and an
 existing non-empty output is never touched.
 """
@@ -15,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset import temporary_files as temporary
-from zendar_dataset.format import stores
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON
 from zendar_dataset.format.writer import write_json_atomic
@@ -36,35 +40,70 @@ def _kind(path: str) -> str:
     return stores.SMALL
 
 
-def _copy_array(source: Any, target_root: Any, path: str) -> None:
-    chunks = stores.chunk_shape(source) or tuple(source.shape)
+def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bool) -> None:
+    """Copy one array chunk-aligned block by block, recomputing its chunk checksums.
+
+    With ``verify`` (the source records checksums) each recomputed checksum must
+    equal the recorded one; a mismatch raises ZendarFormatError naming the chunk.
+    """
+    shape = tuple(source.shape)
+    chunks = stores.chunk_shape(source) or shape or (1,)
     target = stores.create_array(
         target_root,
         path,
-        shape=tuple(source.shape),
+        shape=shape,
         dtype=np.dtype(source.dtype),
-        chunks=chunks or (1,),
+        chunks=chunks,
         kind=_kind(path),
-        resizable=len(source.shape) > 0,
+        resizable=len(shape) > 0,
     )
-    if source.size:
-        row_bytes = max(1, int(np.prod(source.shape[1:], dtype=np.int64)) * np.dtype(source.dtype).itemsize)
+    attrs = stores.read_attrs(source)
+    expected = None
+    if verify:
+        try:
+            expected = checksums.decode(attrs.get(checksums.ARRAY_ATTR), checksums.chunk_count(shape, chunks))
+        except ValueError as exc:
+            raise ZendarFormatError(f"{scene}: {path}: {checksums.ARRAY_ATTR}: {exc}") from None
+    grid = checksums.grid_shape(shape, chunks)
+    computed: list[int] = []
+    if not shape:
+        target[...] = source[...]
+        computed = checksums.block_checksums(np.asarray(source[...]), chunks)
+    elif source.size:
+        row_bytes = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(source.dtype).itemsize)
         step = max(chunks[0], (_COPY_BLOCK_BYTES // row_bytes) // chunks[0] * chunks[0])
-        for start in range(0, source.shape[0], step):
-            target[start : start + step] = source[start : start + step]
-    stores.write_attrs(target, stores.read_attrs(source))
+        for start in range(0, shape[0], step):
+            block = np.asarray(source[start : start + step])
+            target[start : start + step] = block
+            for coords, values in checksums.iter_block_chunks(block, chunks):
+                coords = (coords[0] + start // chunks[0], *coords[1:])
+                index = checksums.linear_index(coords, grid)
+                computed.append(checksums.crc32c(values))
+                if expected is not None and computed[-1] != expected[index]:
+                    raise ZendarFormatError(
+                        f"{scene}: {path}: chunk {list(coords)}: expected {checksums.ALGORITHM} "
+                        f"{expected[index]:08x} (recorded), found {computed[-1]:08x}; the source is corrupt"
+                    )
+    attrs[checksums.ARRAY_ATTR] = checksums.encode(computed)
+    stores.write_attrs(target, attrs)
 
 
-def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str) -> None:
-    """Copy one open scene's hierarchy (groups, arrays, attributes) into a new store."""
+def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str, scene: str = "") -> None:
+    """Copy one open scene's hierarchy (groups, arrays, attributes) into a new store.
+
+    Chunk checksums are recomputed; where the source records them they are checked too.
+    """
+    scene = scene or str(target_path)
     target = stores.create_store(target_path, backend)
     try:
-        stores.write_attrs(target.root, stores.read_attrs(source_root))
+        root_attrs = stores.read_attrs(source_root)
+        verify = root_attrs.get(checksums.ROOT_ATTR) == checksums.ALGORITHM
+        stores.write_attrs(target.root, {**root_attrs, checksums.ROOT_ATTR: checksums.ALGORITHM})
         for path, node in stores.walk(source_root):
             if stores.is_group(node):
                 stores.write_attrs(target.root.require_group(path), stores.read_attrs(node))
             else:
-                _copy_array(node, target.root, path)
+                _copy_array(node, target.root, path, scene, verify)
                 target.raise_if_failed()  # disk full: stop now, not after copying the rest into the void
     finally:
         target.close()
@@ -107,7 +146,7 @@ def convert_dataset(
         for scene_id in index.scene_ids():
             relative = f"scenes/{scene_id}{BACKEND_SUFFIX[backend]}"
             with index.open_scene(scene_id) as scene:  # checks the scene's metadata first
-                convert_scene(scene.store_root, temp / relative, backend)
+                convert_scene(scene.store_root, temp / relative, backend, scene_id)
             scenes[scene_id] = {"path": relative}
         document = {**index.document, "scenes": scenes}
         write_json_atomic(temp / DATASET_JSON, document)

@@ -15,7 +15,7 @@ import fsspec
 import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import stores
+from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.calibration import Calibration
 from zendar_dataset.format.checks import check_scene_metadata
 from zendar_dataset.format.schema import (
@@ -23,8 +23,10 @@ from zendar_dataset.format.schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
     LABEL_FIELD_NAMES,
+    LABEL_OPTIONAL_FIELD_NAMES,
     LABELS,
     SENSOR_GROUPS,
+    SPLITS,
 )
 
 
@@ -34,6 +36,33 @@ def _read_text(location: str, storage_options: dict | None) -> str:
             return handle.read()
     with open(stores.local_path(location), encoding="utf-8") as handle:
         return handle.read()
+
+
+def read_dataset_json(root: str, storage_options: dict | None = None) -> Any:
+    """The parsed ``dataset.json`` of a dataset root (not yet checked against the schema).
+
+    Raises
+    ------
+    ZendarFormatError
+        When the root or the file is missing, not a directory / not a file, not UTF-8 or not JSON.
+    """
+    location = stores.join_location(root, DATASET_JSON)
+    if not stores.is_url(root) and os.path.exists(stores.local_path(root)) and not os.path.isdir(stores.local_path(root)):
+        raise ZendarFormatError(f"{root}: expected a dataset root directory, found a file")
+    try:
+        text = _read_text(location, storage_options)
+    except FileNotFoundError:
+        raise ZendarFormatError(f"{root}: expected {DATASET_JSON} at the dataset root, found none") from None
+    except IsADirectoryError:
+        raise ZendarFormatError(f"{location}: expected a JSON file, found a directory") from None
+    except UnicodeDecodeError as exc:
+        raise ZendarFormatError(f"{location}: expected UTF-8 text, found {exc.reason} at byte {exc.start}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ZendarFormatError(f"{location}: expected JSON, found invalid text ({exc})") from None
+    except RecursionError:
+        raise ZendarFormatError(f"{location}: expected JSON of reasonable depth, found nesting too deep to parse") from None
 
 
 def _object_member(document: dict, key: str, expected: str, where: str, problems: list[str]) -> dict:
@@ -58,12 +87,17 @@ def check_dataset_json(document: Any, where: str) -> list[str]:
         problems.append(f"{where}: name: expected a string, found {document.get('name')!r}")
     scenes = _object_member(document, "scenes", '{scene_id: {"path": ...}}', where, problems)
     for scene_id, entry in scenes.items():
+        if not scene_id or "/" in scene_id or scene_id.startswith("."):
+            problems.append(f"{where}: scenes: expected scene ids without '/' and not starting with '.', found {scene_id!r}")
         path = entry.get("path") if isinstance(entry, dict) else None
         if not isinstance(path, str) or not path:
             problems.append(f"{where}: scenes.{scene_id}.path: expected a relative store path, found {path!r}")
         elif path.startswith("/") or ".." in path.split("/") or not path.endswith(tuple(stores.SUFFIX_BACKEND)):
             problems.append(f"{where}: scenes.{scene_id}.path: expected a relative path ending in .zarr or .h5, found {path!r}")
     splits = _object_member(document, "splits", "{split: [scene_id, ...]}", where, problems)
+    absent = [split for split in SPLITS if split not in splits]
+    if isinstance(document.get("splits"), dict) and absent:
+        problems.append(f"{where}: splits: expected {list(SPLITS)} always present (possibly empty), found no {absent}")
     for split, scene_ids in splits.items():
         if not isinstance(scene_ids, list) or not all(isinstance(s, str) for s in scene_ids):
             problems.append(f"{where}: splits.{split}: expected a list of scene ids, found {scene_ids!r}")
@@ -117,9 +151,11 @@ class DatasetIndex:
             )
         return stores.join_location(self.root, self.scenes[scene_id])
 
-    def open_scene(self, scene_id: str) -> "SceneReader":
-        """Open a scene read-only (metadata only)."""
-        return SceneReader(self.scene_location(scene_id), self.storage_options, scene_id=scene_id)
+    def open_scene(self, scene_id: str, *, verify_checksums: bool = False) -> "SceneReader":
+        """Open a scene read-only (metadata only); see :class:`SceneReader` for ``verify_checksums``."""
+        return SceneReader(
+            self.scene_location(scene_id), self.storage_options, scene_id=scene_id, verify_checksums=verify_checksums
+        )
 
 
 def open_dataset(root: str | os.PathLike, storage_options: dict | None = None) -> DatasetIndex:
@@ -140,16 +176,8 @@ def open_dataset(root: str | os.PathLike, storage_options: dict | None = None) -
     root = os.fspath(root)
     if stores.is_url(root):
         root = root.rstrip("/")
-    location = stores.join_location(root, DATASET_JSON)
-    try:
-        text = _read_text(location, storage_options)
-    except FileNotFoundError:
-        raise ZendarFormatError(f"{root}: expected {DATASET_JSON} at the dataset root, found none") from None
-    try:
-        document = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ZendarFormatError(f"{location}: expected JSON, found invalid text ({exc})") from None
-    problems = check_dataset_json(document, location)
+    document = read_dataset_json(root, storage_options)
+    problems = check_dataset_json(document, stores.join_location(root, DATASET_JSON))
     if problems:
         raise ZendarFormatError("; ".join(problems), problems)
     return DatasetIndex(root, document, storage_options)
@@ -160,13 +188,37 @@ class StoredArray:
 
     Wraps the backend's ``zarr.Array`` or ``h5py.Dataset`` (``.raw``) so that a
     truncated or corrupt chunk raises :class:`ZendarFormatError` naming the scene and path.
+
+    Parameters
+    ----------
+    array
+        The backend array.
+    scene_id, path
+        Where it is, for messages.
+    checksummed : bool
+        Its store records chunk checksums (docs/format.md): a chunk that is not stored is
+        then an error; otherwise it reads as the array's fill value, as Zarr v3 specifies.
+    verify_crc32c : list of int, optional
+        The array's recorded chunk checksums (C order of the chunk grid): every chunk a read
+        touches is read whole and checked against them.  None: no verification (the fast path).
     """
 
-    def __init__(self, array: Any, scene_id: str, path: str) -> None:
+    def __init__(
+        self,
+        array: Any,
+        scene_id: str,
+        path: str,
+        *,
+        checksummed: bool = False,
+        verify_crc32c: list[int] | None = None,
+    ) -> None:
         self.raw = array
         self.scene_id = scene_id
         self.path = path
-        self._direct = stores.direct_frame_reader(array)
+        self._checksummed = checksummed or verify_crc32c is not None
+        self._crc32c = verify_crc32c
+        self._verify = verify_crc32c is not None
+        self._direct = stores.direct_frame_reader(array, missing_is_fill=not self._checksummed)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -208,8 +260,12 @@ class StoredArray:
             if frames is not None:
                 start, stop, squeeze = frames
                 out = self._direct.read(start, stop)
+                if self._verify:
+                    self._check_block(out, start)
                 return out[0] if squeeze else out
-            return self.raw[key]
+            if not self._checksummed:
+                return self.raw[key]
+            return self._read_checked(key)
         except IndexError:
             raise
         except stores.DECODE_ERRORS as exc:
@@ -228,10 +284,83 @@ class StoredArray:
         try:
             if direct_ok:
                 self._direct.read_into(start, stop, out)
-            else:
+                if self._verify:
+                    self._check_block(out, start)
+            elif not self._checksummed:
                 out[...] = self.raw[start:stop]
+            else:
+                out[...] = self._read_checked(slice(start, stop))
         except stores.DECODE_ERRORS as exc:
             raise self._corrupt(exc) from exc
+
+    # -- stores that record checksums: missing chunks are errors, verification on request --
+    def _row_span(self, key: Any) -> tuple[int, int, tuple] | None:
+        """(first row, end row, key with a non-negative axis-0 index or forward slice) of a selection.
+
+        None for selections this does not analyse (Ellipsis, new axes, index arrays, a
+        backward slice): those read every row.
+        """
+        parts = key if isinstance(key, tuple) else (key,)
+        if not parts or any(p is Ellipsis or p is None or not isinstance(p, (int, np.integer, slice)) for p in parts):
+            return None
+        first, n = parts[0], self.raw.shape[0]
+        if isinstance(first, slice):
+            start, stop, step = first.indices(n)
+            if step < 0:
+                return None
+            stop = max(start, stop)
+            return start, stop, (slice(start, stop, step), *parts[1:])
+        index = int(first) + n if first < 0 else int(first)
+        if not 0 <= index < n:
+            raise IndexError(f"{self.scene_id}: {self.path}: index {int(first)} out of range for {n} rows")
+        return index, index + 1, (index, *parts[1:])
+
+    def _read_checked(self, key: Any) -> np.ndarray:
+        """Read ``key`` from a store that records checksums: no missing chunk, and verified on request."""
+        shape = self.shape
+        if not shape:
+            block = np.asarray(self.raw[...])
+            if self._verify:
+                self._check_block(block, 0)
+            return block[key]
+        chunks = self.chunks or shape
+        span = self._row_span(key)
+        lo, hi, normal = span if span is not None else (0, shape[0], key)
+        grid = checksums.grid_shape(shape, chunks)
+        first_chunk, end_chunk = lo // chunks[0], -(-hi // chunks[0])
+        for coords in np.ndindex(max(0, end_chunk - first_chunk), *grid[1:]):
+            coords = (coords[0] + first_chunk, *coords[1:])
+            if not stores.chunk_stored(self.raw, coords):
+                raise ZendarFormatError(
+                    f"{self.scene_id}: {self.path}: expected every chunk stored (the store records checksums), "
+                    f"found chunk {list(coords)} missing"
+                )
+        if not self._verify:
+            return self.raw[key]
+        start, stop = first_chunk * chunks[0], min(shape[0], end_chunk * chunks[0])
+        block = np.asarray(self.raw[start:stop])
+        self._check_block(block, start)
+        if span is None:
+            return block[key]
+        first = normal[0]
+        first = first - start if isinstance(first, int) else slice(first.start - start, first.stop - start, first.step)
+        return block[(first, *normal[1:])]
+
+    def _check_block(self, block: np.ndarray, start: int) -> None:
+        """Compare each chunk of ``block`` (rows from ``start``, a chunk boundary, every other axis whole)."""
+        shape = self.shape
+        chunks = self.chunks or shape or (1,)
+        grid = checksums.grid_shape(shape, chunks)
+        for coords, values in checksums.iter_block_chunks(block, chunks):
+            if coords:
+                coords = (coords[0] + start // chunks[0], *coords[1:])
+            index = checksums.linear_index(coords, grid)
+            found = checksums.crc32c(values)
+            if found != self._crc32c[index]:
+                raise ZendarFormatError(
+                    f"{self.scene_id}: {self.path}: chunk {list(coords)}: expected {checksums.ALGORITHM} "
+                    f"{self._crc32c[index]:08x} (recorded when written), found {found:08x}; the chunk is corrupt"
+                )
 
     def _corrupt(self, exc: BaseException) -> ZendarFormatError:
         return ZendarFormatError(
@@ -263,12 +392,27 @@ class SceneReader:
     backend : {"zarr", "hdf5"}
     location : str
         Path or URL of the store.
+    records_checksums : bool
+        The store records a checksum of every chunk (docs/format.md).
+    verify_checksums : bool
+        Every read checks the chunks it touches against their recorded checksums
+        (whole chunks are read and hashed; off by default, the fast path).  Stores that
+        record no checksums read as usual.
     """
 
-    def __init__(self, location: str | os.PathLike, storage_options: dict | None = None, *, scene_id: str | None = None) -> None:
+    def __init__(
+        self,
+        location: str | os.PathLike,
+        storage_options: dict | None = None,
+        *,
+        scene_id: str | None = None,
+        verify_checksums: bool = False,
+    ) -> None:
         self.location = os.fspath(location)
         self.storage_options = dict(storage_options or {})
         self._expected_scene_id = scene_id
+        self.verify_checksums = bool(verify_checksums)
+        self._crc32c: dict[str, list[int]] = {}
         self._label = scene_id or self.location
         self._store: stores.OpenStore | None = None
         self._pid: int | None = None
@@ -295,6 +439,7 @@ class SceneReader:
         self.calibration: Calibration = meta.calibration
         self.attrs: dict = meta.attrs
         self.streams: list[str] = meta.streams
+        self.records_checksums: bool = meta.attrs.get(checksums.ROOT_ATTR) == checksums.ALGORITHM
 
     @property
     def _root(self) -> Any:
@@ -315,19 +460,28 @@ class SceneReader:
             "location": self.location,
             "storage_options": self.storage_options,
             "expected_scene_id": self._expected_scene_id,
+            "verify_checksums": self.verify_checksums,
             "timestamps": self._timestamps,
             "offsets": self._offsets,
-            "metadata": (self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams),
+            "metadata": (
+                self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams,
+                self.records_checksums,
+            ),
         }
 
     def __setstate__(self, state: dict) -> None:
         self.location = state["location"]
         self.storage_options = state["storage_options"]
         self._expected_scene_id = state["expected_scene_id"]
+        self.verify_checksums = state["verify_checksums"]
+        self._crc32c = {}
         self._label = self._expected_scene_id or self.location
         self._timestamps = state["timestamps"]
         self._offsets = state["offsets"]
-        self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams = state["metadata"]
+        (
+            self.backend, self.scene_id, self.enu_origin, self.calibration, self.attrs, self.streams,
+            self.records_checksums,
+        ) = state["metadata"]
         self._store = None
         self._pid = None
 
@@ -362,7 +516,17 @@ class SceneReader:
         node = stores.get_node(self._root, path.strip("/"))
         if node is None or not stores.is_array(node):
             raise ZendarFormatError(f"{self.scene_id}: {path}: expected an array, found {'a group' if node is not None else 'nothing'}")
-        return StoredArray(node, self.scene_id, path.strip("/"))
+        path = path.strip("/")
+        crc32c = None
+        if self.verify_checksums and self.records_checksums:
+            if path not in self._crc32c:
+                count = checksums.chunk_count(tuple(node.shape), stores.chunk_shape(node) or tuple(node.shape))
+                try:
+                    self._crc32c[path] = checksums.decode(stores.read_attrs(node).get(checksums.ARRAY_ATTR), count)
+                except ValueError as exc:
+                    raise ZendarFormatError(f"{self.scene_id}: {path}: {checksums.ARRAY_ATTR}: {exc}") from None
+            crc32c = self._crc32c[path]
+        return StoredArray(node, self.scene_id, path, checksummed=self.records_checksums, verify_crc32c=crc32c)
 
     def timestamps(self, stream: str) -> np.ndarray:
         """``timestamp_ns`` [N] int64 of a stream (``"radar/left"``, ``"tracklog"``, ``"labels/moving_cars"``…).
@@ -411,4 +575,5 @@ class SceneReader:
         """Every field of ``labels/moving_cars`` as 1-D arrays, or None when labels are withheld."""
         if LABELS not in self.streams:
             return None
-        return {name: self.array(f"{LABELS}/{name}")[...] for name in LABEL_FIELD_NAMES}
+        names = [*LABEL_FIELD_NAMES, *(name for name in LABEL_OPTIONAL_FIELD_NAMES if self.has(f"{LABELS}/{name}"))]
+        return {name: self.array(f"{LABELS}/{name}")[...] for name in names}

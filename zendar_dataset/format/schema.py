@@ -104,6 +104,13 @@ LABEL_FIELDS: tuple[ArraySpec, ...] = (
     _spec("track_id", "int64", "N"),
 )
 LABEL_FIELD_NAMES = tuple(spec.name for spec in LABEL_FIELDS)
+# Optional label fields (a backward-compatible addition): how visible each car is, as nuScenes'
+# num_radar_pts / num_lidar_pts.  Written when known, passed through to ground truth.
+LABEL_OPTIONAL_FIELDS: tuple[ArraySpec, ...] = (
+    _spec("num_radar_scatterers", "int64", "N"),
+    _spec("num_lidar_points", "int64", "N"),
+)
+LABEL_OPTIONAL_FIELD_NAMES = tuple(spec.name for spec in LABEL_OPTIONAL_FIELDS)
 # Fields of one car in ground truth and predictions (everything but the frame's timestamp).
 CAR_FIELDS = tuple(name for name in LABEL_FIELD_NAMES if name != "timestamp_ns")
 

@@ -31,6 +31,9 @@ import numpy as np
 import zarr
 import zarr.storage
 from zarr.codecs import BloscCodec, ZstdCodec
+from zarr.core.sync import sync
+
+from zendar_dataset.errors import ZendarFormatError
 
 from zendar_dataset.format.guarded_file import GuardedFile
 
@@ -173,25 +176,60 @@ def is_group(node: Any) -> bool:
     return isinstance(node, (zarr.Group, h5py.Group))
 
 
+class MetadataError(ZendarFormatError):
+    """A node's metadata cannot be read (truncated JSON, an unknown dtype or codec, a negative shape …)."""
+
+
+# What the backends raise for unreadable metadata; zarr's own errors derive from ValueError.
+_METADATA_ERRORS = (ValueError, TypeError, RuntimeError, OSError, RecursionError, ZeroDivisionError)
+
+
 def get_node(group: Any, path: str) -> Any | None:
-    """The array or group at ``path`` under ``group``, or None when absent."""
+    """The array or group at ``path`` under ``group``, or None when absent.
+
+    Raises :class:`MetadataError` (message starting with ``path``) when its metadata is unreadable.
+    """
     try:
-        return group[path]
+        node = group[path]
     except KeyError:
         return None
+    except _METADATA_ERRORS as exc:
+        raise MetadataError(f"{path}: expected readable metadata, found {type(exc).__name__}: {exc}") from None
+    if isinstance(node, zarr.Array):
+        chunks = node.chunks or ()
+        if any(int(c) < 1 for c in chunks):
+            raise MetadataError(f"{path}: expected a chunk shape of positive sizes, found {list(chunks)}")
+    return node
 
 
 def member_names(group: Any) -> list[str]:
-    """Sorted names of the direct children of a group."""
+    """Sorted names of the direct children of a group.
+
+    For zarr the names come from the store listing (unless the group was opened
+    from consolidated metadata), so that one child with unreadable metadata does
+    not hide its siblings (:func:`get_node` reports it).
+    """
+    if isinstance(group, zarr.Group) and group.metadata.consolidated_metadata is None:
+        prefix = group.store_path.path
+        entries = sync(_list_dir(group.store_path.store, prefix))
+        base = f"{prefix}/" if prefix else ""
+        return sorted(e for e in entries if e != "zarr.json" and sync(group.store_path.store.exists(f"{base}{e}/zarr.json")))
     return sorted(group.keys())
+
+
+async def _list_dir(store: Any, prefix: str) -> list[str]:
+    return [key async for key in store.list_dir(prefix)]
 
 
 def walk(group: Any, prefix: str = "") -> list[tuple[str, Any]]:
     """Every (path, node) below ``group`` in sorted order, groups before their children."""
     out = []
     for name in member_names(group):
-        node = group[name]
         path = f"{prefix}{name}"
+        try:
+            node = get_node(group, name)
+        except MetadataError as exc:
+            raise MetadataError(f"{prefix}{exc}") from None
         out.append((path, node))
         if is_group(node):
             out.extend(walk(node, path + "/"))
@@ -237,14 +275,55 @@ def chunk_shape(array: Any) -> tuple[int, ...] | None:
     return tuple(array.chunks) if array.chunks is not None else None
 
 
-def count_missing_chunks(array: Any) -> int:
-    """How many chunks of ``array`` that should hold data are absent from the store."""
+def fill_value(array: Any) -> Any:
+    """The value a chunk that is not stored reads as (Zarr v3 ``fill_value``, HDF5 fill value)."""
     if isinstance(array, zarr.Array):
-        return int(array.nchunks) - int(array.nchunks_initialized)
-    if array.chunks is None or array.size == 0:
-        return 0
-    expected = int(np.prod([-(-n // c) for n, c in zip(array.shape, array.chunks)]))
-    return expected - int(array.id.get_num_chunks())
+        return array.fill_value
+    return array.fillvalue
+
+
+def missing_chunks(array: Any) -> list[tuple[int, ...]]:
+    """Grid coordinates (C order) of the chunks of ``array`` absent from the store.
+
+    One listing of the store (or of the HDF5 chunk index), not one probe per chunk.
+    The caller bounds the number of chunks (corrupt metadata can claim any shape).
+    """
+    shape = tuple(array.shape)
+    if not shape or 0 in shape:
+        return []
+    chunks = chunk_shape(array)
+    if isinstance(array, zarr.Array):
+        prefix = array.store_path.path
+        base = f"{prefix}/" if prefix else ""
+        keys = set(sync(_list_prefix(array.store_path.store, base)))
+        grid = tuple(-(-n // c) for n, c in zip(shape, chunks))
+        return [c for c in np.ndindex(*grid) if base + array.metadata.encode_chunk_key(c) not in keys]
+    if chunks is None:
+        return []  # contiguous storage: the data block exists with the dataset
+    stored = set()
+    for i in range(array.id.get_num_chunks()):
+        offset = array.id.get_chunk_info(i).chunk_offset
+        stored.add(tuple(int(o) // int(c) for o, c in zip(offset, chunks)))
+    grid = tuple(-(-n // c) for n, c in zip(shape, chunks))
+    return [c for c in np.ndindex(*grid) if c not in stored]
+
+
+async def _list_prefix(store: Any, prefix: str) -> list[str]:
+    return [key async for key in store.list_prefix(prefix)]
+
+
+def chunk_stored(array: Any, coords: tuple[int, ...]) -> bool:
+    """Whether the chunk at grid coordinates ``coords`` is present in the store."""
+    if isinstance(array, zarr.Array):
+        key = array.metadata.encode_chunk_key(coords)
+        if isinstance(array.store, zarr.storage.LocalStore):
+            return os.path.isfile(os.path.join(str(array.store.root), array.path, key))
+        path = f"{array.path}/{key}" if array.path else key
+        return bool(sync(array.store.exists(path)))
+    if array.chunks is None:
+        return True  # contiguous storage: the data block exists with the dataset
+    offset = tuple(int(i) * int(c) for i, c in zip(coords, array.chunks))
+    return array.id.get_chunk_info_by_coord(offset).byte_offset is not None
 
 
 def read_attrs(node: Any) -> dict[str, Any]:
@@ -293,11 +372,13 @@ class DirectFrameReader:
     them into the output array ourselves.  Anything else uses the backend.
     """
 
-    def __init__(self, frame_shape: tuple[int, ...], dtype: np.dtype, locate) -> None:
+    def __init__(self, frame_shape: tuple[int, ...], dtype: np.dtype, locate, missing_fill: Any = None) -> None:
         self.frame_shape = frame_shape
         self.dtype = dtype
         self.frame_bytes = int(np.prod(frame_shape, dtype=np.int64)) * dtype.itemsize
-        self._locate = locate  # frame -> (file path, byte offset, stored size)
+        self._locate = locate  # frame -> (file path, byte offset, stored size), or None when not stored
+        # None: a chunk that is not stored is an error; otherwise the value it reads as.
+        self._missing_fill = missing_fill
 
     def read(self, start: int, stop: int) -> np.ndarray:
         """Frames ``start:stop`` as one array; raises ValueError for a missing or wrong-size chunk."""
@@ -309,7 +390,13 @@ class DirectFrameReader:
         """Read frames ``start:stop`` into ``out`` (C-contiguous, this reader's dtype and frame shape)."""
         flat = out.reshape(stop - start, -1).view(np.uint8)
         for row, frame in enumerate(range(start, stop)):
-            path, offset, size = self._locate(frame)
+            located = self._locate(frame)
+            if located is None:
+                if self._missing_fill is None:
+                    raise ValueError(f"chunk of frame {frame} is missing")
+                out[row] = self._missing_fill
+                continue
+            path, offset, size = located
             if size != self.frame_bytes:
                 raise ValueError(f"chunk of frame {frame} holds {size} bytes, expected {self.frame_bytes}")
             with open(path, "rb", buffering=0) as handle:
@@ -319,8 +406,12 @@ class DirectFrameReader:
                 raise ValueError(f"chunk of frame {frame} is truncated: read {got} of {self.frame_bytes} bytes")
 
 
-def direct_frame_reader(array: Any) -> DirectFrameReader | None:
-    """A :class:`DirectFrameReader` for ``array`` when it is local, raw and one frame per chunk, else None."""
+def direct_frame_reader(array: Any, missing_is_fill: bool = False) -> DirectFrameReader | None:
+    """A :class:`DirectFrameReader` for ``array`` when it is local, raw and one frame per chunk, else None.
+
+    ``missing_is_fill``: a chunk that is not stored reads as the array's fill value
+    (Zarr v3 semantics, for stores without checksums); otherwise it is an error.
+    """
     shape = tuple(array.shape)
     if not shape or tuple(array.chunks or ()) != (1, *shape[1:]):
         return None
@@ -339,14 +430,14 @@ def direct_frame_reader(array: Any) -> DirectFrameReader | None:
         base = pathlib.Path(array.store.root) / array.path
         zeros = (0,) * (len(shape) - 1)
 
-        def locate_zarr(frame: int) -> tuple[str, int, int]:
+        def locate_zarr(frame: int) -> tuple[str, int, int] | None:
             path = base / array.metadata.encode_chunk_key((frame, *zeros))
             try:
                 return str(path), 0, path.stat().st_size
             except FileNotFoundError:
-                raise ValueError(f"chunk of frame {frame} is missing ({path})") from None
+                return None
 
-        return DirectFrameReader(shape[1:], dtype, locate_zarr)
+        return DirectFrameReader(shape[1:], dtype, locate_zarr, fill_value(array) if missing_is_fill else None)
     if isinstance(array, h5py.Dataset):
         if array.compression or array.shuffle or array.fletcher32 or array.scaleoffset is not None:
             return None
@@ -357,15 +448,15 @@ def direct_frame_reader(array: Any) -> DirectFrameReader | None:
         chunk_id = array.id
         located: dict[int, tuple[str, int, int]] = {}  # the B-tree lookup costs as much as the read
 
-        def locate_hdf5(frame: int) -> tuple[str, int, int]:
+        def locate_hdf5(frame: int) -> tuple[str, int, int] | None:
             if frame not in located:
                 info = chunk_id.get_chunk_info_by_coord((frame, *zeros))
                 if info.byte_offset is None:
-                    raise ValueError(f"chunk of frame {frame} is not stored")
+                    return None
                 located[frame] = (filename, int(info.byte_offset), int(info.size))
             return located[frame]
 
-        return DirectFrameReader(shape[1:], dtype, locate_hdf5)
+        return DirectFrameReader(shape[1:], dtype, locate_hdf5, fill_value(array) if missing_is_fill else None)
     return None
 
 

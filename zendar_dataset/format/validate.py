@@ -9,7 +9,6 @@ expected and what was found.
 
 from __future__ import annotations
 
-import json
 import os
 from collections import Counter
 from typing import Any
@@ -17,38 +16,82 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import stores
+from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.checks import check_scene_metadata
-from zendar_dataset.format.reader import _read_text, check_dataset_json
-from zendar_dataset.format.schema import DATASET_JSON, DETECTIONS, LABELS, TRACKLOG, stream_specs
+from zendar_dataset.format.reader import check_dataset_json, read_dataset_json
+from zendar_dataset.format.schema import DATASET_JSON, DETECTIONS, LABEL_OPTIONAL_FIELDS, LABELS, TRACKLOG, stream_specs
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
-# Arrays stored one frame per chunk: (stream group, array name).
-_FRAME_CHUNKED = {("radar", "cube"), ("sar", "image"), ("camera", "image")}
+_KEEP_BYTES = 64 * 2**20  # arrays up to this size are kept in memory for the value checks
+_LISTED = 5  # chunk coordinates named in a message before "…"
+NO_CHECKSUMS_NOTE = (
+    "note: the store records no chunk checksums (written by another tool or an older writer): "
+    "its chunks cannot be verified, and chunks not stored read as the fill value"
+)
 
 
-def _read_all(array: Any, scene: str, path: str, problems: list[str]) -> np.ndarray | None:
-    """Read an array block by block along axis 0, reporting missing and undecodable chunks."""
-    missing = stores.count_missing_chunks(array)
-    if missing:
-        problems.append(f"{scene}: {path}: expected every chunk stored, found {missing} missing")
-    step = (stores.chunk_shape(array) or array.shape or (1,))[0] or 1
-    keep = array.size * np.dtype(array.dtype).itemsize <= 64 * 2**20
-    blocks = []
-    for start in range(0, array.shape[0], step):
+def _listed(coords: list[tuple[int, ...]]) -> str:
+    shown = ", ".join(str(list(c)) for c in coords[:_LISTED])
+    return shown + (", …" if len(coords) > _LISTED else "")
+
+
+def _read_all(array: Any, scene: str, path: str, problems: list[str], checksummed: bool) -> np.ndarray | None:
+    """Read an array chunk row by chunk row, reporting missing, undecodable and altered chunks.
+
+    In a store that records checksums, every chunk must be stored and hash to its
+    recorded CRC-32C; every failure is listed (scene, path, chunk coordinates).
+    Returns the values when the array is small enough to keep and every chunk was readable.
+    """
+    shape = tuple(array.shape)
+    chunks = stores.chunk_shape(array) or shape or (1,)
+    grid = checksums.grid_shape(shape, chunks)
+    expected: list[int] | None = None
+    missing: set[tuple[int, ...]] = set()
+    if checksummed:
+        expected = checksums.decode(stores.read_attrs(array).get(checksums.ARRAY_ATTR), checksums.chunk_count(shape, chunks))
         try:
-            block = array[start : start + step]
+            absent = stores.missing_chunks(array)
         except stores.DECODE_ERRORS as exc:
-            problems.append(
-                f"{scene}: {path}: expected readable chunks, found a truncated or corrupt chunk at rows "
-                f"{start}:{start + step} ({type(exc).__name__}: {exc})"
-            )
+            problems.append(f"{scene}: {path}: expected a readable chunk index, found {type(exc).__name__}: {exc}")
             return None
+        missing = set(absent)
+        if absent:
+            problems.append(
+                f"{scene}: {path}: expected every chunk stored (the store records checksums), found "
+                f"{len(absent)} missing: chunk {_listed(absent)}"
+            )
+    keep = int(np.prod(shape, dtype=object)) * np.dtype(array.dtype).itemsize <= _KEEP_BYTES
+    blocks, unreadable, altered = [], [], []
+    for start in range(0, shape[0], chunks[0]) if shape else [None]:
+        try:
+            block = np.asarray(array[start : start + chunks[0]] if shape else array[...])
+        except stores.DECODE_ERRORS as exc:
+            unreadable.append(f"rows {start}:{start + chunks[0]} ({type(exc).__name__}: {exc})")
+            continue
+        if expected is not None:
+            for coords, values in checksums.iter_block_chunks(block, chunks):
+                if coords:
+                    coords = (coords[0] + start // chunks[0], *coords[1:])
+                index = checksums.linear_index(coords, grid)
+                if coords not in missing and checksums.crc32c(values) != expected[index]:
+                    altered.append(coords)
         if keep:
             blocks.append(block)
-    if not keep:
+    if unreadable:
+        problems.append(
+            f"{scene}: {path}: expected readable chunks, found {len(unreadable)} truncated or corrupt: "
+            + "; ".join(unreadable[:_LISTED]) + ("; …" if len(unreadable) > _LISTED else "")
+        )
+    for coords in altered:
+        problems.append(
+            f"{scene}: {path}: chunk {list(coords)}: expected the bytes written ({checksums.ALGORITHM} recorded "
+            f"{expected[checksums.linear_index(coords, grid)]:08x}), found different values; the chunk is corrupt"
+        )
+    if not keep or unreadable:
         return None
-    return np.concatenate(blocks) if blocks else np.zeros(array.shape, dtype=array.dtype)
+    if not shape:
+        return blocks[0]
+    return np.concatenate(blocks) if blocks else np.zeros(shape, dtype=array.dtype)
 
 
 def _check_increasing(values: np.ndarray, scene: str, path: str, strict: bool, problems: list[str]) -> None:
@@ -63,20 +106,18 @@ def _check_increasing(values: np.ndarray, scene: str, path: str, strict: bool, p
         )
 
 
-def _check_stream_data(root: Any, scene: str, stream: str, problems: list[str]) -> dict[str, np.ndarray]:
+def _check_stream_data(
+    arrays: dict[str, Any], root: Any, scene: str, stream: str, problems: list[str], checksummed: bool
+) -> dict[str, np.ndarray]:
+    """Read every array of ``stream`` whose metadata passed (``arrays``: path -> array) and check its values."""
     group = stream.split("/", 1)[0]
     values: dict[str, np.ndarray] = {}
-    for spec in stream_specs(stream):
+    for spec in (*stream_specs(stream), *(LABEL_OPTIONAL_FIELDS if stream == LABELS else ())):
         path = f"{stream}/{spec.name}"
-        node = stores.get_node(root, path)
-        if node is None or not stores.is_array(node) or np.dtype(node.dtype) != spec.dtype:
+        node = arrays.get(path)
+        if node is None:
             continue  # reported by the metadata check
-        if (group, spec.name) in _FRAME_CHUNKED:
-            chunks = stores.chunk_shape(node)
-            want = (1, *node.shape[1:])
-            if chunks != want:
-                problems.append(f"{scene}: {path}: expected one chunk per frame {list(want)}, found chunks {list(chunks) if chunks else None}")
-        data = _read_all(node, scene, path, problems)
+        data = _read_all(node, scene, path, problems, checksummed)
         if data is not None:
             values[spec.name] = data
             # Detections keep the release's NaN (a quantity not measured), as docs/format.md allows.
@@ -110,12 +151,22 @@ def _check_stream_data(root: Any, scene: str, stream: str, problems: list[str]) 
         for name in ("length", "width"):
             if name in values and np.any(values[name] <= 0):
                 problems.append(f"{scene}: {LABELS}/{name}: expected positive metres, found {int(np.count_nonzero(values[name] <= 0))} values <= 0")
+        for spec in LABEL_OPTIONAL_FIELDS:
+            if spec.name in values and np.any(values[spec.name] < 0):
+                problems.append(f"{scene}: {LABELS}/{spec.name}: expected counts >= 0, found {int(np.count_nonzero(values[spec.name] < 0))} negative")
     return values
 
 
-def _validate_open_store(store: stores.OpenStore, scene: str, expected_scene_id: str | None) -> list[str]:
+def _validate_open_store(
+    store: stores.OpenStore, scene: str, expected_scene_id: str | None, notes: list[str] | None
+) -> list[str]:
     meta, problems = check_scene_metadata(store.root, scene, expected_scene_id)
-    data = {stream: _check_stream_data(store.root, scene, stream, problems) for stream in meta.streams}
+    if not meta.records_checksums and notes is not None:
+        notes.append(f"{scene}: {NO_CHECKSUMS_NOTE}")
+    data = {
+        stream: _check_stream_data(meta.arrays, store.root, scene, stream, problems, meta.records_checksums)
+        for stream in meta.streams
+    }
     if LABELS in data:
         sar_streams = sorted(s for s in meta.streams if s.startswith("sar/"))
         label_timestamps = data[LABELS].get("timestamp_ns")
@@ -132,7 +183,10 @@ def _validate_open_store(store: stores.OpenStore, scene: str, expected_scene_id:
 
 
 def validate_scene(
-    location: str | os.PathLike, scene_id: str | None = None, storage_options: dict | None = None
+    location: str | os.PathLike,
+    scene_id: str | None = None,
+    storage_options: dict | None = None,
+    notes: list[str] | None = None,
 ) -> list[str]:
     """Every violation of format v1 in one scene store (an empty list when valid).
 
@@ -144,6 +198,8 @@ def validate_scene(
         The id the dataset gives this scene (checked against its attribute); messages use it.
     storage_options
         fsspec options for URLs.
+    notes
+        When given, receives remarks that are not violations (a store that records no checksums).
     """
     location = os.fspath(location)
     scene = scene_id or location
@@ -154,7 +210,7 @@ def validate_scene(
     except (OSError, ValueError) as exc:
         return [f"{scene}: /: expected a readable zarr v3 or HDF5 store at {location}, found {type(exc).__name__}: {exc}"]
     try:
-        problems = _validate_open_store(store, scene, scene_id)
+        problems = _validate_open_store(store, scene, scene_id, notes)
     finally:
         store.close()
     stale = stores.consolidated_mismatches(location, storage_options)
@@ -166,16 +222,18 @@ def validate_scene(
     return problems
 
 
-def validate_dataset(root: str | os.PathLike, storage_options: dict | None = None) -> list[str]:
-    """Every violation of format v1 in a dataset root: ``dataset.json`` and every scene it lists."""
+def validate_dataset(
+    root: str | os.PathLike, storage_options: dict | None = None, notes: list[str] | None = None
+) -> list[str]:
+    """Every violation of format v1 in a dataset root: ``dataset.json`` and every scene it lists.
+
+    ``notes``, when given, receives remarks that are not violations (scenes whose stores record no checksums).
+    """
     root = os.fspath(root)
-    location = stores.join_location(root, DATASET_JSON)
     try:
-        document = json.loads(_read_text(location, storage_options))
-    except FileNotFoundError:
-        return [f"{root}: /: expected {DATASET_JSON} at the dataset root, found none"]
-    except json.JSONDecodeError as exc:
-        return [f"{location}: expected JSON, found invalid text ({exc})"]
+        document = read_dataset_json(root, storage_options)
+    except ZendarFormatError as exc:
+        return list(exc.problems)
     problems = check_dataset_json(document, DATASET_JSON)
     if problems and not isinstance(document, dict):
         return problems
@@ -189,7 +247,7 @@ def validate_dataset(root: str | os.PathLike, storage_options: dict | None = Non
     for scene_id, entry in scenes.items():
         path = entry.get("path") if isinstance(entry, dict) else None
         if isinstance(path, str) and path.endswith(tuple(stores.SUFFIX_BACKEND)):
-            problems.extend(validate_scene(stores.join_location(root, path), scene_id, storage_options))
+            problems.extend(validate_scene(stores.join_location(root, path), scene_id, storage_options, notes))
     return problems
 
 

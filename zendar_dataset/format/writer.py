@@ -23,7 +23,7 @@ import numpy as np
 
 from zendar_dataset import temporary_files as temporary
 from zendar_dataset.errors import ZendarFormatError
-from zendar_dataset.format import stores
+from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.calibration import CameraCalibration, Calibration, RadarCalibration
 from zendar_dataset.format.schema import (
     BACKEND_SUFFIX,
@@ -36,6 +36,7 @@ from zendar_dataset.format.schema import (
     FORMAT_NAME,
     FORMAT_VERSION,
     LABEL_FIELDS,
+    LABEL_OPTIONAL_FIELDS,
     LABELS,
     SPLITS,
     STREAM_ARRAYS,
@@ -93,6 +94,7 @@ class _Stream:
     pending_points: list[np.ndarray] = field(default_factory=list)
     pending_rows: int = 0
     written_rows: int = 0
+    bulk_crc32c: list[int] = field(default_factory=list)  # one per chunk of ``bulk`` written so far
     offsets: list[int] = field(default_factory=lambda: [0])
 
 
@@ -155,7 +157,13 @@ class SceneWriter:
         self._store = stores.create_store(self._temp_path, self.backend)
         root = self._store.root
         stores.write_attrs(
-            root, {"scene_id": self.scene_id, "time_reference": TIME_REFERENCE, "enu_origin": self.enu_origin}
+            root,
+            {
+                "scene_id": self.scene_id,
+                "time_reference": TIME_REFERENCE,
+                "enu_origin": self.enu_origin,
+                checksums.ROOT_ATTR: checksums.ALGORITHM,
+            },
         )
         stores.write_attrs(root.require_group(CALIBRATION_GROUP), {CALIBRATION_ATTR: self.calibration.to_json()})
 
@@ -227,6 +235,7 @@ class SceneWriter:
         stream.bulk.resize((n + 1, *frame.shape))
         stream.bulk[n] = frame
         self._store.raise_if_failed()  # disk full: stop now, not after writing the rest into the void
+        stream.bulk_crc32c.append(checksums.crc32c(frame))  # the frame is the chunk
 
     def append_radar(self, sensor: str, timestamp_ns: int, cube: np.ndarray) -> None:
         """Append a range-Doppler cube ``[R, D, A]`` complex64 stamped at the centre of its chirps."""
@@ -317,6 +326,7 @@ class SceneWriter:
         start = stream.written_rows
         stream.bulk.resize((start + take, 4))
         stream.bulk[start : start + take] = rows[:take]
+        stream.bulk_crc32c.extend(checksums.block_checksums(rows[:take], (LIDAR_CHUNK_ROWS, 4)))
         stream.written_rows += take
         rest = rows[take:]
         stream.pending_points = [rest] if rest.shape[0] else []
@@ -363,11 +373,14 @@ class SceneWriter:
             raise RuntimeError(f"{self.scene_id}: the writer is closed")
         where = f"{self.scene_id}: {LABELS}"
         missing = [spec.name for spec in LABEL_FIELDS if spec.name not in labels]
-        unknown = sorted(set(labels) - {spec.name for spec in LABEL_FIELDS})
+        unknown = sorted(set(labels) - {spec.name for spec in (*LABEL_FIELDS, *LABEL_OPTIONAL_FIELDS)})
         if missing or unknown:
-            raise ZendarFormatError(f"{where}: expected fields {[s.name for s in LABEL_FIELDS]}, missing {missing}, unknown {unknown}")
+            raise ZendarFormatError(
+                f"{where}: expected fields {[s.name for s in LABEL_FIELDS]} (optional {[s.name for s in LABEL_OPTIONAL_FIELDS]}), "
+                f"missing {missing}, unknown {unknown}"
+            )
         out = {}
-        for spec in LABEL_FIELDS:
+        for spec in (*LABEL_FIELDS, *(s for s in LABEL_OPTIONAL_FIELDS if s.name in labels)):
             value = np.asarray(labels[spec.name])
             if spec.dtype.kind == "i" and value.dtype.kind not in "iu":
                 raise ZendarFormatError(f"{where}/{spec.name}: expected {spec.dtype.name}, found {value.dtype.name}")
@@ -439,17 +452,19 @@ class SceneWriter:
 
     def _write_small(self, path: str, array: np.ndarray) -> None:
         rows = max(1, min(array.shape[0], SMALL_CHUNK_ROWS))
+        chunks = (rows, *array.shape[1:])
         target = stores.create_array(
             self._store.root,
             path,
             shape=array.shape,
             dtype=array.dtype,
-            chunks=(rows, *array.shape[1:]),
+            chunks=chunks,
             kind=stores.SMALL,
             resizable=False,
         )
         if array.size:
             target[...] = array
+        stores.write_attrs(target, {checksums.ARRAY_ATTR: checksums.encode(checksums.block_checksums(array, chunks))})
 
     # -- finishing -----------------------------------------------------------
     def _first_sar_timestamps(self) -> np.ndarray | None:
@@ -466,6 +481,8 @@ class SceneWriter:
             if stream.path.startswith("lidar/"):
                 self._flush_points(stream, final=True)
                 self._write_small(f"{stream.path}/offsets", np.asarray(stream.offsets, dtype=np.int64))
+            if stream.bulk is not None:
+                stores.write_attrs(stream.bulk, {checksums.ARRAY_ATTR: checksums.encode(stream.bulk_crc32c)})
         if self._labels is not None:
             sar_timestamps = self._first_sar_timestamps()
             label_timestamps = self._labels["timestamp_ns"]
