@@ -29,7 +29,7 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.release.messages import Kind, kinds_named
-from zendar_dataset.release.wire import WireError, decode
+from zendar_dataset.release.wire import WireError, check, decode
 
 HEADER_BYTES = 8
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -146,7 +146,7 @@ def _first_record_parses(data: memoryview, chain: _Chain, kinds: tuple[Kind, ...
             continue
         for kind in kinds:
             try:
-                decode(kind.message, data, offset, offset + length)
+                check(kind.message, data, offset, offset + length)
                 return True
             except WireError:
                 continue
@@ -199,7 +199,7 @@ def _resync(data: memoryview, start: int, kind: Kind) -> int | None:
         try:
             for offset, length in zip(chain.offsets[:4], chain.lengths[:4]):
                 if length:
-                    decode(kind.message, data, offset, offset + length)
+                    check(kind.message, data, offset, offset + length)
         except WireError:
             continue
         return int(pos)
@@ -298,7 +298,7 @@ class ReleaseStream:
             survivors = []
             for kind in alive:
                 try:
-                    decode(kind.message, self._data, offset, offset + length)
+                    check(kind.message, self._data, offset, offset + length)
                     survivors.append(kind)
                 except WireError as exc:
                     if first_error is None:

@@ -1,0 +1,218 @@
+"""Import throughput of ``import-release`` against a plain read of the same files, in the same run.
+
+A synthetic release scene is written once (vectorised encoders, laid out as
+the fact sheet says): magnitude SAR images of two radars, range-Doppler cubes
+of paper size, lidar sweeps of 30 000 points, detections and a tracklog.  Then,
+alternating, (a) a plain read of every file (``read`` into one reused buffer,
+the floor for any reader) and (b) the full import into a fresh format-v1
+dataset (decode, convert, write, rename).  Throughput is MB of input per
+second; the ratio b/a is the claim (aim: at least 0.5).  The decode-only rate
+(every record decoded into arrays, nothing written) is printed too, to show
+where the time goes.
+
+Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import shutil
+import statistics
+import struct
+import tempfile
+import time
+
+import numpy as np
+
+from zendar_dataset.release import ReleaseStream, import_release
+from zendar_dataset.release import records as rec
+
+T0_S = 1_264_000_000.0
+ORIGIN_ECEF = np.array([-2_706_000.0, -4_261_000.0, 3_885_000.0])
+SERIALS = {"1739000J1Q": 1.0, "1739000J2R": -1.0}  # lateral sign of each radar's images
+
+
+def _key(number: int, wire: int) -> bytes:
+    return bytes([number << 3 | wire])
+
+
+def _ld(number: int, payload: bytes) -> bytes:
+    length = len(payload)
+    out = bytearray(_key(number, 2))
+    while True:
+        byte = length & 0x7F
+        length >>= 7
+        out.append(byte | (0x80 if length else 0))
+        if not length:
+            return bytes(out) + payload
+
+
+def _f64(number: int, value: float) -> bytes:
+    return _key(number, 1) + struct.pack("<d", value)
+
+
+def _vec(v) -> bytes:
+    return _f64(1, v[0]) + _f64(2, v[1]) + _f64(3, v[2])
+
+
+def _varint_field(number: int, value: int) -> bytes:
+    out = bytearray(_key(number, 0))
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return bytes(out)
+
+
+def _stream(path: pathlib.Path, records, header: bool = True) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as handle:
+        if header:
+            handle.write(bytes(8))
+        for payload in records:
+            handle.write(struct.pack("<I", len(payload)))
+            handle.write(payload)
+
+
+def _vec_elements(tag: int, xyz: np.ndarray) -> np.ndarray:
+    """``[P]`` encoded ``tag len Vec3d`` sub-fields (29 bytes each) as a structured array."""
+    dtype = np.dtype([("tag", "u1"), ("len", "u1"), ("t1", "u1"), ("x", "<f8"), ("t2", "u1"), ("y", "<f8"), ("t3", "u1"), ("z", "<f8")])
+    out = np.zeros(len(xyz), dtype)
+    out["tag"], out["len"], out["t1"], out["t2"], out["t3"] = tag, 27, 0x09, 0x11, 0x19
+    out["x"], out["y"], out["z"] = xyz.T
+    return out
+
+
+def _lidar_frame(t: float, position_ecef: np.ndarray, position_local: np.ndarray, intensity: np.ndarray) -> bytes:
+    """One LidarPointsFrame, every point in one fixed 71-byte layout (intensity < 128: one-byte varint)."""
+    n = len(position_ecef)
+    dtype = np.dtype([("tag", "u1"), ("len", "u1"), ("t_ts", "u1"), ("ts", "<f8"), ("g", "V29"), ("l", "V29"), ("t_i", "u1"), ("i", "u1")])
+    points = np.zeros(n, dtype)
+    points["tag"], points["len"], points["t_ts"], points["t_i"] = 0x12, 69, 0x09, 0x20
+    points["ts"] = t
+    points["g"] = _vec_elements(0x12, position_ecef).view("V29")
+    points["l"] = _vec_elements(0x1A, position_local).view("V29")
+    points["i"] = intensity
+    return _f64(1, t) + points.tobytes()
+
+
+def _detection(t: float, p: np.ndarray, r: float) -> bytes:
+    floats = b"".join(_key(n, 5) + struct.pack("<f", v) for n, v in ((3, 10.0), (4, 1e-4), (5, 1e-4), (6, r), (7, 0.5), (8, 0.1), (9, 0.0), (10, 12.0)))
+    return _ld(1, _f64(1, t)) + _ld(2, _vec(p)) + floats
+
+
+def write_release(root: pathlib.Path, sar_frames: int, rng: np.random.Generator) -> int:
+    scene = root / "2020-02-03_2252" / "001"
+    rows, cols = 512, 512
+    attitude = _f64(1, 0.5) + _f64(2, -0.5) + _f64(3, 0.5) + _f64(4, -0.5)
+    for serial, side in SERIALS.items():
+        images, states = [], []
+        for k in range(sar_frames):
+            t = T0_S + k / 10
+            position = ORIGIN_ECEF + [0.8 * k, 0.0, 0.0]
+            origin = position + [0.0, side * 5.0, 0.0]
+            pixels = rng.integers(0, 1000, size=rows * cols, dtype="<u4").tobytes()
+            model = _ld(1, _vec(origin)) + _ld(2, _vec((0.04, 0.0, 0.0))) + _ld(3, _vec((0.0, side * 0.04, 0.0)))
+            data = _varint_field(1, 5) + _varint_field(2, rows) + _varint_field(3, cols) + _ld(4, pixels)
+            images.append(
+                _f64(1, t) + _ld(2, attitude) + _ld(3, _vec(position)) + _varint_field(4, k) + _ld(10, _ld(1, model) + _ld(2, data))
+            )
+            points = [_ld(2, _detection(t, origin + rng.normal(size=3), 10.0 + d)) for d in range(200)]
+            states.append(_ld(1, _f64(1, t)) + b"".join(points) + _varint_field(3, k))
+        _stream(scene / f"{serial}_images.pbs", images)
+        _stream(scene / f"{serial}_points.pbs", states)
+    poses = [
+        _f64(1, T0_S + k / 200) + _ld(2, attitude) + _ld(3, _vec(ORIGIN_ECEF + [0.04 * k, 0.0, 0.0])) + _varint_field(4, k)
+        for k in range(sar_frames * 20)
+    ]
+    _stream(scene / "vn200.pbs", poses)
+    sweeps = []
+    for k in range(sar_frames):
+        local = rng.normal(scale=20.0, size=(30_000, 3))
+        sweeps.append(_lidar_frame(T0_S + k / 10, ORIGIN_ECEF + local, local, rng.integers(0, 128, 30_000)))
+    _stream(scene / "lidar" / "00" / "stream.pbs", sweeps, header=False)
+    R, D, A = 512, 256, 4
+    model = (
+        _varint_field(1, A)
+        + _ld(2, _f64(1, 0.0) + _f64(2, 0.176) + _varint_field(3, R))
+        + _ld(3, _f64(1, -D / 2 * 0.1) + _f64(2, 0.1) + _varint_field(3, D))
+        + b"".join(_ld(4, _vec((0.0019 * a, 0.0, 0.0))) for a in range(A))
+        + _f64(5, 0.0039)
+    )
+    _stream(scene / "range_Doppler" / "left_model.pbs", [model])
+    cube = (rng.normal(size=(R, D, A)) + 1j * rng.normal(size=(R, D, A))).astype("<c8").tobytes()
+    _stream(scene / "range_Doppler" / "left_rd.pbs", [_f64(1, T0_S + k / 20) + _ld(2, cube) for k in range(sar_frames // 2)])
+    return sum(p.stat().st_size for p in root.rglob("*.pbs"))
+
+
+def plain_read(root: pathlib.Path) -> None:
+    buffer = bytearray(16 * 2**20)
+    view = memoryview(buffer)
+    for path in sorted(root.rglob("*.pbs")):
+        with open(path, "rb", buffering=0) as handle:
+            while handle.readinto(view):
+                pass
+
+
+def decode_only(root: pathlib.Path) -> None:
+    for path in sorted(root.rglob("*.pbs")):
+        with ReleaseStream(path) as stream:
+            kind = stream.kind
+            for _, buf, start, end in stream.records():
+                if kind.name == "TrackerState":
+                    rec.detections(kind, buf, start, end)
+                elif kind.name == "LidarPointsFrame":
+                    rec.lidar_sweep(kind, buf, start, end)
+                else:
+                    record = stream.kind.message
+                    from zendar_dataset.release.wire import decode
+
+                    decoded = decode(record, buf, start, end)
+                    if kind.name == "Image":
+                        rec.sar_pixels(rec.sar_frame(kind, decoded))
+                    elif kind.name == "RangeDopplerFrame":
+                        np.frombuffer(decoded["data"], "<c8")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sar-frames", type=int, default=40, help="SAR frames per radar (default 40)")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--keep", type=pathlib.Path, default=None, help="write the release here and keep it")
+    args = parser.parse_args()
+    print(f"load average before: {os.getloadavg()}")
+    work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
+    src = args.keep or work / "release"
+    try:
+        size = write_release(src, args.sar_frames, np.random.default_rng(0))
+        print(f"release: {size / 1e6:.1f} MB in {len(list(src.rglob('*.pbs')))} streams")
+        import_release(src, work / "warm", log=None)  # compile the numba scanner, warm the page cache
+        shutil.rmtree(work / "warm")
+        plain, full, decode = [], [], []
+        for r in range(args.repeats):
+            start = time.perf_counter()
+            plain_read(src)
+            plain.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            decode_only(src)
+            decode.append(time.perf_counter() - start)
+            out = work / f"out{r}"
+            start = time.perf_counter()
+            import_release(src, out)
+            full.append(time.perf_counter() - start)
+            shutil.rmtree(out)
+        mb = size / 1e6
+        for label, times in (("plain read", plain), ("decode only", decode), ("import-release", full)):
+            print(f"{label:<16} {mb / statistics.median(times):8.1f} MB/s  (median of {len(times)}; min {min(times):.2f} s, max {max(times):.2f} s)")
+        print(f"import / plain read: {statistics.median(plain) / statistics.median(full):.3f}  (decode only / plain: "
+              f"{statistics.median(plain) / statistics.median(decode):.3f})")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        print(f"load average after: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()
