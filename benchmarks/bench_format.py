@@ -14,11 +14,11 @@ from __future__ import annotations
 import argparse
 import pathlib
 import tempfile
-import time
 
 import h5py
 import numpy as np
 import zarr
+from harness import interleaved, print_environment, print_load_after, time_calls
 from numcodecs import LZ4, Blosc, Zstd
 
 from zendar_dataset.format import SceneReader, SceneWriter
@@ -37,12 +37,8 @@ CALIBRATION = {
 
 
 def best_of(repeats: int, work) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        work()
-        times.append(time.perf_counter() - start)
-    return min(times)
+    """Best of ``repeats`` calls (the compression table: a single-threaded codec on one frame)."""
+    return time_calls(work, repeats, warmup=0).min
 
 
 def compression_table(cube: np.ndarray, image: np.ndarray) -> None:
@@ -67,8 +63,9 @@ def read_table(workdir: pathlib.Path, n_frames: int, repeats: int) -> None:
     rng = np.random.default_rng(0)
     cubes = (rng.standard_normal((n_frames, R, D, A)) + 1j * rng.standard_normal((n_frames, R, D, A))).astype(np.complex64)
     total_mb = cubes.nbytes / 1e6
-    print(f"\n## Reading {n_frames} radar cubes [{R},{D},{A}] complex64 ({total_mb:.0f} MB), warm cache, best of {repeats}")
-    print(f"{'backend':<8}{'reader':<40}{'MB/s':>9}{'cubes/s':>10}{'vs raw':>8}")
+    print(f"\n## Reading {n_frames} radar cubes [{R},{D},{A}] complex64 ({total_mb:.0f} MB), warm cache, "
+          f"{repeats} interleaved rounds, one thread each")
+    print(f"{'backend':<8}{'reader':<44}{'MB/s median (min-max)':>20}{'cubes/s':>10}{'vs raw':>8}")
     for suffix in (".zarr", ".h5"):
         path = workdir / f"scene{suffix}"
         with SceneWriter(path, "bench", enu_origin=ENU_ORIGIN, calibration=CALIBRATION) as writer:
@@ -103,20 +100,18 @@ def read_table(workdir: pathlib.Path, n_frames: int, repeats: int) -> None:
 
         for f in (raw, ours, backend):
             f()  # warm the page cache and any handles
-        # Interleaved, best of: the machine is shared, so each reader gets the same quiet moments.
-        best = {raw: np.inf, ours: np.inf, backend: np.inf}
-        for _ in range(repeats):
-            for f in best:
-                best[f] = min(best[f], best_of(1, f))
-        t_raw = best[raw]
+        # Interleaved: the machine is shared, so each reader sees the same moments of load.
+        times = interleaved({"raw": raw, "ours": ours, "backend": backend}, repeats, warmup=0)
+        t_raw = times["raw"].median
         name = "zarr" if suffix == ".zarr" else "hdf5"
         rows = (
-            ("raw chunk bytes -> np.fromfile (reference)", t_raw),
-            ("SceneReader.array(...)[k]", best[ours]),
-            (f"{type(native).__module__.split('.')[0]} array[k] (backend reader)", best[backend]),
+            ("raw chunk bytes -> np.fromfile (reference)", times["raw"]),
+            ("SceneReader.array(...)[k]", times["ours"]),
+            (f"{type(native).__module__.split('.')[0]} array[k] (backend reader)", times["backend"]),
         )
-        for label, seconds in rows:
-            print(f"{name:<8}{label:<40}{total_mb / seconds:>9.0f}{n_frames / seconds:>10.0f}{t_raw / seconds:>8.2f}")
+        for label, spread in rows:
+            rate = f"{total_mb / spread.median:.0f} ({total_mb / spread.max:.0f}-{total_mb / spread.min:.0f})"
+            print(f"{name:<8}{label:<44}{rate:>20}{n_frames / spread.median:>10.0f}{t_raw / spread.median:>8.2f}")
         assert cube[n_frames - 1].tobytes() == cubes[-1].tobytes()
         scene.close()
 
@@ -126,6 +121,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=32)
     parser.add_argument("--repeats", type=int, default=15)
     args = parser.parse_args()
+    print_environment(("numpy", "zarr", "h5py", "numcodecs"))
     rng = np.random.default_rng(1)
     cube = (rng.standard_normal((R, D, A)) + 1j * rng.standard_normal((R, D, A))).astype(np.complex64)
     yy, xx = np.mgrid[0:720, 0:1280]
@@ -134,6 +130,7 @@ def main() -> None:
     compression_table(cube, image)
     with tempfile.TemporaryDirectory() as workdir:
         read_table(pathlib.Path(workdir), args.frames, args.repeats)
+    print_load_after()
 
 
 if __name__ == "__main__":
