@@ -63,7 +63,9 @@ def test_ctrl_c_and_a_failing_worker_leave_no_partial_scene_and_a_rerun_finishes
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "zendar_dataset.cli.data", "synth", str(out), "--profile", "tiny", "--scenes", "2",
            "--split-ratios", "0.5,0,0.5", "--withhold-test-labels", "--jobs", "2", "--quiet"]
-    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # SIGINT's disposition set explicitly: under nohup or `cmd &` pytest inherits it ignored.
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not ((out / "scenes").is_dir() and _temporaries(out)) and time.monotonic() < deadline:
         time.sleep(0.05)

@@ -15,6 +15,7 @@ the start-up handler is in place before the heavy imports.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import sys
@@ -75,16 +76,25 @@ def interrupts_raise() -> Iterator[None]:
     try:
         yield
     except KeyboardInterrupt:
+        _quiet_abandoned_io()
         raise
     except BaseException as exc:
         if _interrupted:
+            _quiet_abandoned_io()
             raise KeyboardInterrupt from exc
         raise
     else:
         if _interrupted:
+            _quiet_abandoned_io()
             raise KeyboardInterrupt
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def _quiet_abandoned_io() -> None:
+    # zarr does its I/O on an asyncio loop in a background thread; an interrupted write leaves
+    # its coroutine pending, and asyncio would log "Task was destroyed but it is pending!" at exit.
+    logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
 
 
 def zendar_data() -> int:
