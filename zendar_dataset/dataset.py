@@ -34,6 +34,7 @@ from zendar_dataset.sync import (
     MISSING,
     SENSOR_GROUPS,
     STREAM_GROUPS,
+    SyncReport,
     SyncTable,
     scene_sync_table,
 )
@@ -258,8 +259,8 @@ class ZendarDataset(Dataset):
         self.sync_table(scene_id)
         return self._poses(self.scene_ids.index(scene_id))
 
-    def sync_report(self) -> pd.DataFrame:
-        """Residuals and drops per scene and stream.
+    def sync_report(self) -> SyncReport:
+        """Residuals and drops per scene and stream (a DataFrame; ``print`` shows a summary).
 
         Columns: ``scene_id``, ``reference``, ``reference_frames`` (frames of the
         reference stream), ``items`` (kept), ``stream``, ``window``, ``tolerance_ms``,
@@ -283,8 +284,8 @@ class ZendarDataset(Dataset):
             stats.insert(2, "reference_frames", table.n_reference)
             frames.append(stats)
         if not frames:
-            return pd.DataFrame(columns=["scene_id", "reference", "reference_frames", "stream"])
-        return pd.concat(frames, ignore_index=True)
+            return SyncReport(columns=["scene_id", "reference", "reference_frames", "stream"])
+        return SyncReport(pd.concat(frames, ignore_index=True))
 
     # -- items ------------------------------------------------------------------
     def _locate(self, index: int) -> tuple[int, int]:

@@ -172,6 +172,48 @@ def _latest(reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolera
     return np.where(filled, last, MISSING).astype(np.int64)
 
 
+class SyncReport(pd.DataFrame):
+    """Residuals and drops per scene and stream: a DataFrame whose ``print`` is a summary.
+
+    All columns stay in the frame (``report.columns``, ``report.to_string()``,
+    filtering, ``set_index`` …; derived frames are plain DataFrames).  ``str()``
+    shows the columns a reader checks first, with residuals in milliseconds,
+    instead of pandas' width-truncated table that cuts the stream names away.
+    """
+
+    @property
+    def _constructor(self):
+        return pd.DataFrame
+
+    def summary(self) -> str:
+        """One line per scene and stream: kept items, matched, missing, dropped, median and max |Δt| in ms."""
+        if self.empty:
+            return "sync report: no scenes"
+        view = pd.DataFrame(
+            {
+                "scene_id": self["scene_id"],
+                "stream": self["stream"],
+                "items": pd.to_numeric(self["items"], errors="coerce").astype("Int64"),
+                "matched": pd.to_numeric(self["matched"], errors="coerce").astype("Int64"),
+                "missing": pd.to_numeric(self["missing"], errors="coerce").astype("Int64"),
+                "dropped": pd.to_numeric(self["dropped"], errors="coerce").astype("Int64"),
+                "median|dt|_ms": pd.to_numeric(self["abs_dt_median_ns"], errors="coerce") / 1e6,
+                "max|dt|_ms": pd.to_numeric(self["abs_dt_max_ns"], errors="coerce") / 1e6,
+            }
+        )
+        references = sorted(set(self["reference"].astype(str)))
+        n_scenes = self["scene_id"].nunique()
+        header = (
+            f"sync report: {n_scenes} scene{'' if n_scenes == 1 else 's'}, reference {', '.join(references)}, "
+            "dt = element - reference"
+        )
+        table = view.to_string(index=False, float_format=lambda v: f"{v:.3f}", na_rep="-")
+        return f"{header}\n{table}\n(a DataFrame of {len(self.columns)} columns: report.to_string() shows them all)"
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
 @dataclass
 class SyncTable:
     """The synchronisation index of one scene: one row per kept reference frame.

@@ -14,11 +14,53 @@ from zendar_dataset.eval.protocol import BANDS_M
 from zendar_dataset.eval.report import prepare_out_dir, write_atomically
 
 
-def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[Path]:
-    """Write ``out_dir/pr_<band>.png`` for every band.
+def pr_figure(metrics: dict[str, Any], band: str) -> Figure:
+    """The precision-recall figure of one band (Agg canvas attached).
 
-    Each plot shows the measured precision at each distinct score (dots) and the precision
-    envelope whose area is the AP (step line).
+    Shows the measured precision at each distinct score (dots) and the precision envelope
+    whose area is the AP (step line); the legend sits below the axes, never over a curve.
+
+    Parameters
+    ----------
+    metrics
+        The structure returned by :func:`zendar_dataset.eval.evaluate`.
+    band
+        A key of ``BANDS_M``.
+    """
+    low_m, high_m = BANDS_M[band]
+    method = metrics.get("meta", {}).get("method", "")
+    curve = metrics["pr_curves"][band]
+    ap = metrics["ap"][band]
+    # Constrained layout makes room for the legend below the axes.
+    figure = Figure(figsize=(5, 4.4), dpi=100, layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    if ap is None:
+        axes.text(0.5, 0.5, "no ground truth in this band", ha="center", va="center")
+        title_ap = "AP n/a"
+    elif not curve["recall"]:
+        axes.text(0.5, 0.5, "no detections in this band", ha="center", va="center")
+        title_ap = f"AP {100.0 * ap:.1f}%"
+    else:
+        recall = [0.0] + curve["recall"]
+        envelope = curve["precision_envelope"][:1] + curve["precision_envelope"]
+        axes.step(recall, envelope, where="pre", label="precision envelope")
+        axes.plot(curve["recall"], curve["precision"], ".", markersize=3, label="precision")
+        axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
+        title_ap = f"AP {100.0 * ap:.1f}%"
+    axes.set_xlim(0.0, 1.0)
+    axes.set_ylim(0.0, 1.02)
+    axes.set_xlabel("recall")
+    axes.set_ylabel("precision")
+    # Method names can be long: on their own line, shortened to fit the figure's width.
+    method_line = method if len(method) <= 48 else method[:47] + "…"
+    axes.set_title(f"{method_line}\n{band} [{low_m:g}, {high_m:g}) m: {title_ap}".strip(), fontsize=10)
+    axes.grid(alpha=0.3)
+    return figure
+
+
+def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[Path]:
+    """Write ``out_dir/pr_<band>.png`` for every band (see :func:`pr_figure`).
 
     Parameters
     ----------
@@ -33,37 +75,10 @@ def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[
         The files written, in band order.
     """
     out = prepare_out_dir(out_dir)
-    method = metrics.get("meta", {}).get("method", "")
     written = []
-    for band, (low_m, high_m) in BANDS_M.items():
-        curve = metrics["pr_curves"][band]
-        ap = metrics["ap"][band]
-        figure = Figure(figsize=(5, 4), dpi=100)
-        FigureCanvasAgg(figure)
-        axes = figure.add_subplot()
-        if ap is None:
-            axes.text(0.5, 0.5, "no ground truth in this band", ha="center", va="center")
-            title_ap = "AP n/a"
-        elif not curve["recall"]:
-            axes.text(0.5, 0.5, "no detections in this band", ha="center", va="center")
-            title_ap = f"AP {100.0 * ap:.1f}%"
-        else:
-            recall = [0.0] + curve["recall"]
-            envelope = curve["precision_envelope"][:1] + curve["precision_envelope"]
-            axes.step(recall, envelope, where="pre", label="precision envelope")
-            axes.plot(curve["recall"], curve["precision"], ".", markersize=3, label="precision")
-            axes.legend(loc="lower left")
-            title_ap = f"AP {100.0 * ap:.1f}%"
-        axes.set_xlim(0.0, 1.0)
-        axes.set_ylim(0.0, 1.02)
-        axes.set_xlabel("recall")
-        axes.set_ylabel("precision")
-        # Method names can be long: on their own line, shortened to fit the figure's width.
-        method_line = method if len(method) <= 48 else method[:47] + "…"
-        axes.set_title(f"{method_line}\n{band} [{low_m:g}, {high_m:g}) m: {title_ap}".strip(), fontsize=10)
-        axes.grid(alpha=0.3)
+    for band in BANDS_M:
         buffer = io.BytesIO()
-        figure.savefig(buffer, format="png")
+        pr_figure(metrics, band).savefig(buffer, format="png")
         path = out / f"pr_{band}.png"
         write_atomically(path, buffer.getvalue())
         written.append(path)

@@ -27,7 +27,8 @@ class GuardedFile:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self.path = os.fspath(path)
-        self._file = open(self.path, "x+b")
+        # Unbuffered: with a buffer, a seek or read would flush pending bytes and fail there.
+        self._file = open(self.path, "x+b", buffering=0)
         self.error: OSError | None = None
 
     def _record(self, exc: OSError) -> None:
@@ -48,13 +49,16 @@ class GuardedFile:
         return self._file.readinto(buffer)
 
     def write(self, data) -> int:
-        size = memoryview(data).nbytes
+        view = memoryview(data).cast("B")
+        size = view.nbytes
         if self.error is None:
             try:
-                return self._file.write(data)
+                while view.nbytes:  # a raw write may take only part
+                    view = view[self._file.write(view) :]
+                return size
             except OSError as exc:
                 self._record(exc)
-        self._file.seek(size, os.SEEK_CUR)
+        self._file.seek(view.nbytes, os.SEEK_CUR)
         return size
 
     def truncate(self, size: int | None = None) -> int:

@@ -135,6 +135,10 @@ def _check_stream_data(
                 f"{scene}: {stream}/offsets: expected non-decreasing offsets from 0 to {total} (rows of points), "
                 f"found first {offsets[0]}, last {offsets[-1]}, {int(np.count_nonzero(np.diff(offsets) < 0))} decreasing steps"
             )
+    if group == DETECTIONS:
+        rows = {s.name: int(arrays[f"{stream}/{s.name}"].shape[0]) for s in stream_specs(stream) if s.shape[0] == "P" and arrays.get(f"{stream}/{s.name}") is not None}
+        if len(set(rows.values())) > 1:
+            problems.append(f"{scene}: {stream}: expected every per-detection array to have the same rows, found {rows}")
     if group == "sar" and "aperture_ns" in values:
         aperture = values["aperture_ns"]
         bad = np.flatnonzero(aperture[:, 0] > aperture[:, 1])
