@@ -1,10 +1,12 @@
 """Simulator costs: cube synthesis (fast vs exact), SAR image, lidar sweep, whole tiny/demo datasets.
 
-The whole-dataset rows compare ``jobs`` worker processes (default: the usable
-CPUs) with ``jobs=1`` (scenes one after another in this process), measured in
-the same run; both write byte-identical datasets.
+The whole-dataset rows compare ``jobs`` worker processes (the usable CPUs) with
+``jobs=1`` (scenes one after another in this process), measured in the same run;
+both write byte-identical datasets. The crossover rows time ``tiny`` datasets of
+several sizes both ways, interleaved: what ``zendar-data synth``'s choice of
+``--jobs`` (``default_jobs``) rests on.
 
-Run: python benchmarks/bench_sim.py [--skip-demo] [--skip-serial-demo]
+Run: python benchmarks/bench_sim.py [--skip-demo] [--skip-serial-demo] [--crossover 3 6 12]
 (the demo rows take minutes; the figure quoted in docs/simulator.md is
 ``time zendar-data synth /tmp/demo_jobs --profile demo`` on an idle 2-core machine).
 """
@@ -19,7 +21,9 @@ import tempfile
 import time
 
 import numpy as np
+from harness import interleaved, print_environment, print_load_after
 
+from zendar_dataset.cli.data_synth import default_jobs
 from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.radar.fmcw import beat_signal_exact
 from zendar_dataset.radar.range_doppler import range_doppler
@@ -96,11 +100,32 @@ def bench_dataset(name: str, jobs: int, serial_s: float | None) -> float:
     return seconds
 
 
+def bench_crossover(scene_counts: list[int], repeats: int) -> None:
+    """``tiny`` scenes, ``jobs=1`` against the usable CPUs, interleaved: where workers start to pay off."""
+    cpus = usable_cpus()
+    print(f"\ntiny profile, jobs 1 vs {cpus} by number of scenes ({repeats} interleaved runs each; "
+          f"'zendar-data synth' picks jobs {default_jobs('tiny', 3)} for the default 3)")
+    print(f"{'scenes':>7} {'jobs 1 s':>22} {f'jobs {cpus} s':>22} {'speed-up':>9}")
+    for scenes in scene_counts:
+        def run(jobs: int) -> None:
+            out = pathlib.Path(tempfile.mkdtemp()) / "tiny"
+            synthesize_dataset(out, "tiny", n_scenes=scenes, progress=False, jobs=jobs)
+            shutil.rmtree(out.parent)
+
+        times = interleaved({1: lambda: run(1), cpus: lambda: run(cpus)}, repeats, warmup=0)
+        print(f"{scenes:>7} {times[1].text('.1f'):>22} {times[cpus].text('.1f'):>22} "
+              f"{times[1].median / times[cpus].median:>9.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--skip-demo", action="store_true", help="skip the demo dataset (minutes)")
     parser.add_argument("--skip-serial-demo", action="store_true", help="skip the jobs=1 demo reference (minutes)")
+    parser.add_argument("--crossover", type=int, nargs="*", default=[3, 6, 12], metavar="SCENES",
+                        help="tiny-profile scene counts for the jobs 1 vs all-CPUs comparison (none: skip)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per crossover point")
     args = parser.parse_args()
+    print_environment(("numpy", "numba", "scipy"))
     bench_cube()
     bench_scene_parts()
     cpus = usable_cpus()
@@ -111,6 +136,9 @@ def main() -> None:
     if not args.skip_demo:
         serial = None if args.skip_serial_demo else bench_dataset("demo", 1, None)
         bench_dataset("demo", cpus, serial)
+    if args.crossover:
+        bench_crossover(args.crossover, args.repeats)
+    print_load_after()
 
 
 if __name__ == "__main__":

@@ -19,6 +19,24 @@ def _ratios(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
+def default_jobs(profile: str, n_scenes: int) -> int:
+    """Worker processes ``synth`` uses without ``--jobs``: the usable CPUs, or 1 where workers
+    cannot pay off.
+
+    A spawned worker costs seconds before its first scene (interpreter, imports, compiled
+    kernels loaded), and scenes are handed out whole, so the last round leaves CPUs idle. On
+    the 2-core reference machine (``benchmarks/bench_sim.py``) a ``tiny`` scene takes about a
+    second and its 3-scene dataset was slower with 2 workers than in one process (5.5-6.3 s
+    against 4.7 s); a ``demo`` dataset (5 scenes of about 30 s) took 1 min 33 s against 2 min 34 s.
+    """
+    from zendar_dataset.sim.generate import usable_cpus
+
+    cpus = usable_cpus()
+    if profile == "tiny" or n_scenes < 2 * cpus:
+        return 1
+    return cpus
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "synth",
@@ -36,18 +54,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")
     parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
                         help="worker processes, one scene each at a time (default: the usable CPUs, at most the "
-                        "scenes left; 1 = in this process); the output does not depend on it")
+                        "scenes left, but 1 for the tiny profile or fewer scenes than twice the CPUs, where "
+                        "workers cost more than they save; 1 = in this process); the output does not depend on it")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    from zendar_dataset.sim.generate import synthesize_dataset, usable_cpus
+    from zendar_dataset.sim.generate import synthesize_dataset
+    from zendar_dataset.sim.profiles import get_profile
 
     if args.scenes is not None and args.scenes < 1:
         raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
     if args.jobs is not None and args.jobs < 1:
         raise ZendarError(f"--jobs must be at least 1, got {args.jobs}")
+    n_scenes = get_profile(args.profile).default_scenes if args.scenes is None else args.scenes
     with writing(args.out):
         out = synthesize_dataset(
             args.out,
@@ -58,7 +79,7 @@ def _run(args: argparse.Namespace) -> int:
             backend=args.backend,
             progress=not args.quiet,
             withhold_test_labels=args.withhold_test_labels,
-            jobs=usable_cpus() if args.jobs is None else args.jobs,
+            jobs=default_jobs(args.profile, n_scenes) if args.jobs is None else args.jobs,
         )
     print(f"wrote {out}")
     return 0
