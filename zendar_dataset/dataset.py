@@ -121,6 +121,10 @@ class ZendarDataset(Dataset):
         Inside a DataLoader worker, radar batches are read into a pool of at most this
         many recycled shared-memory slots per worker (each the size of one radar's
         batch); beyond it, batches take torch's ordinary path. 0 turns the pool off.
+    verify_checksums
+        Check every chunk read against the CRC-32C its store recorded when written
+        (docs/format.md), raising ZendarFormatError naming the chunk on a mismatch.
+        Off by default: reads then hash nothing. Stores that record no checksums read as usual.
 
     Notes
     -----
@@ -146,6 +150,7 @@ class ZendarDataset(Dataset):
         storage_options: dict | None = None,
         keep_unfilled_windows: bool = False,
         worker_pool_slots: int = 16,
+        verify_checksums: bool = False,
     ) -> None:
         self.streams = _check_streams(streams)
         if isinstance(require, str):
@@ -170,6 +175,7 @@ class ZendarDataset(Dataset):
         self.storage_options = dict(storage_options or {})
         self.keep_unfilled_windows = keep_unfilled_windows
         self.worker_pool_slots = int(worker_pool_slots)
+        self.verify_checksums = bool(verify_checksums)
 
         index = open_dataset(self.root, self.storage_options)
         self.dataset_name = index.name
@@ -177,7 +183,7 @@ class ZendarDataset(Dataset):
         self._readers: list[SceneReader] = []
         self._tables: list[SyncTable] = []
         for scene_id in self.scene_ids:
-            reader = index.open_scene(scene_id)
+            reader = index.open_scene(scene_id, verify_checksums=self.verify_checksums)
             try:
                 self._check_scene(reader)
                 self._tables.append(

@@ -73,6 +73,16 @@ def make_dataset(root: pathlib.Path, backend: str = "zarr", *, seed: int = 0, n_
     return root
 
 
+def make_small_dataset(root: pathlib.Path, backend: str = "zarr", *, seed: int = 0) -> pathlib.Path:
+    """One labelled scene ``s0`` (train; val and test empty), every stream, for the fault and rule tests."""
+    rng = np.random.default_rng(seed)
+    writer = DatasetWriter(root, "small", backend=backend)
+    with writer.scene("s0", enu_origin=ENU_ORIGIN, calibration=make_calibration()) as scene:
+        write_scene(scene, rng, n_frames=4)
+    writer.finalize({"train": ["s0"]})
+    return root
+
+
 def tree_digest(root: pathlib.Path) -> dict[str, tuple[str, int]]:
     """Hash and mtime of every file under ``root``: detects any write."""
     out = {}

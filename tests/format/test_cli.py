@@ -79,8 +79,8 @@ def test_validate_finds_missing_and_corrupt_chunks(tmp_path):
     assert result.returncode == 2
     assert result.stdout.splitlines() == [
         "s2: sar/right/image: expected every chunk stored (the store records checksums), found 1 missing: chunk [1, 0, 0]",
-        "s2: camera/front/image: expected readable chunks, found 1 truncated or corrupt: rows 0:1 "
-        "(RuntimeError: error during blosc decompression: -1)",
+        "s2: camera/front/image: chunk [0, 0, 0, 0]: expected a readable chunk (rows 0:1), found a truncated "
+        "or corrupt one (RuntimeError: error during blosc decompression: -1)",
     ]
 
 

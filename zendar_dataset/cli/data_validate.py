@@ -23,7 +23,10 @@ def run(args: argparse.Namespace) -> int:
     from zendar_dataset.format.reader import open_dataset
     from zendar_dataset.format.validate import validate_dataset
 
-    problems = validate_dataset(args.root)
+    notes: list[str] = []
+    problems = validate_dataset(args.root, notes=notes)
+    for note in notes:
+        print(note)
     if problems:
         for problem in problems:
             print(problem)

@@ -172,8 +172,11 @@ def _check_attrs(root: Any, scene: str, expected_scene_id: str | None, meta: Sce
     if not isinstance(origin, dict) or set(origin) != set(ENU_ORIGIN_KEYS):
         found = sorted(origin) if isinstance(origin, dict) else repr(origin)
         problems.append(f"{scene}: /: expected attribute enu_origin with keys {list(ENU_ORIGIN_KEYS)}, found {found}")
-    elif not all(isinstance(origin[k], (int, float)) and not isinstance(origin[k], bool) for k in ENU_ORIGIN_KEYS):
-        problems.append(f"{scene}: /: expected attribute enu_origin with numeric values, found {origin}")
+    elif not all(
+        isinstance(origin[k], (int, float)) and not isinstance(origin[k], bool) and np.isfinite(origin[k])
+        for k in ENU_ORIGIN_KEYS
+    ):
+        problems.append(f"{scene}: /: expected attribute enu_origin with finite numeric values, found {origin}")
     else:
         meta.enu_origin = {k: float(origin[k]) for k in ENU_ORIGIN_KEYS}
     algorithm = attrs.get(checksums.ROOT_ATTR)

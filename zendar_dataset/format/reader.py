@@ -509,11 +509,17 @@ class SceneReader:
 
     def has(self, path: str) -> bool:
         """Whether an array or group exists at ``path`` inside the scene."""
-        return stores.get_node(self._root, path.strip("/")) is not None
+        try:
+            return stores.get_node(self._root, path.strip("/")) is not None
+        except stores.MetadataError as exc:
+            raise ZendarFormatError(f"{self.scene_id}: {exc}") from None
 
     def array(self, path: str) -> StoredArray:
         """The lazy array at ``path`` (e.g. ``"radar/left/cube"``)."""
-        node = stores.get_node(self._root, path.strip("/"))
+        try:
+            node = stores.get_node(self._root, path.strip("/"))
+        except stores.MetadataError as exc:
+            raise ZendarFormatError(f"{self.scene_id}: {exc}") from None
         if node is None or not stores.is_array(node):
             raise ZendarFormatError(f"{self.scene_id}: {path}: expected an array, found {'a group' if node is not None else 'nothing'}")
         path = path.strip("/")

@@ -66,7 +66,12 @@ def _read_all(array: Any, scene: str, path: str, problems: list[str], checksumme
         try:
             block = np.asarray(array[start : start + chunks[0]] if shape else array[...])
         except stores.DECODE_ERRORS as exc:
-            unreadable.append(f"rows {start}:{start + chunks[0]} ({type(exc).__name__}: {exc})")
+            # Blocks span whole chunk rows; the format's arrays have one chunk per row block.
+            where = [start // chunks[0], *(0 if g == 1 else "*" for g in grid[1:])] if shape else []
+            unreadable.append(
+                f"{scene}: {path}: chunk {where}: expected a readable chunk (rows {start}:{start + chunks[0]}), "
+                f"found a truncated or corrupt one ({type(exc).__name__}: {exc})"
+            )
             continue
         if expected is not None:
             for coords, values in checksums.iter_block_chunks(block, chunks):
@@ -77,15 +82,11 @@ def _read_all(array: Any, scene: str, path: str, problems: list[str], checksumme
                     altered.append(coords)
         if keep:
             blocks.append(block)
-    if unreadable:
-        problems.append(
-            f"{scene}: {path}: expected readable chunks, found {len(unreadable)} truncated or corrupt: "
-            + "; ".join(unreadable[:_LISTED]) + ("; …" if len(unreadable) > _LISTED else "")
-        )
+    problems.extend(unreadable)
     for coords in altered:
         problems.append(
-            f"{scene}: {path}: chunk {list(coords)}: expected the bytes written ({checksums.ALGORITHM} recorded "
-            f"{expected[checksums.linear_index(coords, grid)]:08x}), found different values; the chunk is corrupt"
+            f"{scene}: {path}: chunk {list(coords)}: expected the values written ({checksums.ALGORITHM} "
+            f"{expected[checksums.linear_index(coords, grid)]:08x} recorded), found different ones; the chunk is corrupt"
         )
     if not keep or unreadable:
         return None
