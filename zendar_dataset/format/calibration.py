@@ -8,6 +8,7 @@ frame, ``p_ego = R(rotation_wxyz) · p_sensor + translation_m``.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -85,6 +86,11 @@ class RadarCalibration(SensorCalibration):
         Doppler bin d is at ``(d - D/2) * doppler_bin_mps`` m/s; positive means the range grows.
     rx_positions_m : ndarray, shape (A, 3), float64
         Receive antenna positions in the radar frame, metres.
+    fov_azimuth_deg : float or None
+        Optional: full horizontal field of view, degrees, centred on the boresight (0 < fov <= 360).
+    sar_bandwidth_hz : float or None
+        Optional: swept bandwidth of the waveform this radar's SAR images are formed from, Hz (SAR
+        range resolution ``c / (2 sar_bandwidth_hz)``); absent when it is ``bandwidth_hz``.
     """
 
     center_frequency_hz: float
@@ -92,6 +98,8 @@ class RadarCalibration(SensorCalibration):
     range_bin_m: float
     doppler_bin_mps: float
     rx_positions_m: np.ndarray
+    fov_azimuth_deg: float | None = None
+    sar_bandwidth_hz: float | None = None
 
     def _check(self, name: str = "radar") -> list[str]:
         problems = super()._check(name)
@@ -107,7 +115,27 @@ class RadarCalibration(SensorCalibration):
             problems.append(f"{name}.rx_positions_m: expected shape [A, 3] with A >= 1, found {shape}")
         else:
             self.rx_positions_m = positions
+        fov = self.fov_azimuth_deg
+        if fov is not None:
+            if isinstance(fov, bool) or not isinstance(fov, (int, float, np.floating, np.integer)) or not 0 < fov <= 360:
+                problems.append(f"{name}.fov_azimuth_deg: expected a number in (0, 360], found {fov!r}")
+            else:
+                self.fov_azimuth_deg = float(fov)
+        sar_bandwidth = self.sar_bandwidth_hz
+        if sar_bandwidth is not None:
+            if (isinstance(sar_bandwidth, bool) or not isinstance(sar_bandwidth, (int, float, np.floating, np.integer))
+                    or not (math.isfinite(sar_bandwidth) and sar_bandwidth > 0)):
+                problems.append(f"{name}.sar_bandwidth_hz: expected a positive number, found {sar_bandwidth!r}")
+            else:
+                self.sar_bandwidth_hz = float(sar_bandwidth)
         return problems
+
+    def to_json(self) -> dict[str, Any]:
+        out = super().to_json()
+        for key in ("fov_azimuth_deg", "sar_bandwidth_hz"):
+            if out.get(key) is None:
+                out.pop(key, None)
+        return out
 
 
 @dataclass
@@ -145,6 +173,7 @@ class CameraCalibration(SensorCalibration):
 _RADAR_KEYS = {f.name for f in fields(RadarCalibration)}
 _CAMERA_KEYS = {f.name for f in fields(CameraCalibration)}
 _SENSOR_KEYS = {f.name for f in fields(SensorCalibration)}
+_OPTIONAL_KEYS = {"fov_azimuth_deg", "sar_bandwidth_hz"}
 
 
 def _sensor_from_json(name: str, entry: Any, problems: list[str]) -> SensorCalibration | None:
@@ -157,13 +186,13 @@ def _sensor_from_json(name: str, entry: Any, problems: list[str]) -> SensorCalib
         cls, keys = CameraCalibration, _CAMERA_KEYS
     else:
         cls, keys = SensorCalibration, _SENSOR_KEYS
-    missing = sorted(keys - entry.keys())
+    missing = sorted(keys - _OPTIONAL_KEYS - entry.keys())
     if missing:
         problems.append(f"sensors.{name}: missing {', '.join(missing)}")
         return None
     record = object.__new__(cls)
     for key in keys:
-        setattr(record, key, entry[key])
+        setattr(record, key, entry.get(key))
     found = record._check(f"sensors.{name}")
     if found:
         problems.extend(found)

@@ -3,7 +3,8 @@
 Every frame of the first SAR stream (in name order) of each labelled scene of
 the split appears, frames without cars with an empty list.  A car is
 ``{"x", "y", "length", "width", "yaw", "vx", "vy", "track_id"}`` in the ego
-frame at the frame's timestamp (metres, radians, m/s).
+frame at the frame's timestamp (metres, radians, m/s), plus the optional label
+fields (``num_radar_scatterers``, ``num_lidar_points``) where the scene has them.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.reader import SceneReader, open_dataset
-from zendar_dataset.format.schema import CAR_FIELDS, LABELS, frame_id
+from zendar_dataset.format.schema import CAR_FIELDS, LABEL_OPTIONAL_FIELD_NAMES, LABELS, frame_id
 from zendar_dataset.format.writer import write_json_atomic
 
 from zendar_dataset.output_location import refuse_output_inside
@@ -39,9 +40,11 @@ def scene_ground_truth(scene: SceneReader) -> dict[str, list[dict]] | None:
             f"found {int(np.count_nonzero(unknown))} that are not (first {int(label_timestamps[unknown][0])})"
         )
     frames: dict[str, list[dict]] = {frame_id(scene.scene_id, t): [] for t in frame_timestamps}
-    columns = {name: labels[name].tolist() for name in CAR_FIELDS}
+    # Optional label fields (docs/format.md) ride along; the evaluator ignores what it does not use.
+    names = [*CAR_FIELDS, *(name for name in LABEL_OPTIONAL_FIELD_NAMES if name in labels)]
+    columns = {name: labels[name].tolist() for name in names}
     for row, timestamp_ns in enumerate(label_timestamps.tolist()):
-        frames[frame_id(scene.scene_id, timestamp_ns)].append({name: columns[name][row] for name in CAR_FIELDS})
+        frames[frame_id(scene.scene_id, timestamp_ns)].append({name: columns[name][row] for name in names})
     return frames
 
 

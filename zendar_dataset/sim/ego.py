@@ -22,6 +22,7 @@ from zendar_dataset.geometry.quaternion import matrix_to_quat_wxyz
 from zendar_dataset.geometry.se3 import SE3
 from zendar_dataset.radar.fmcw import FmcwParams
 from zendar_dataset.sim.profiles import SimProfile
+from zendar_dataset.sim.radar_model import RadarFrontEnd
 from zendar_dataset.sim.rotate import compose, rotate
 from zendar_dataset.sim.trajectory import Trajectory
 
@@ -36,6 +37,15 @@ def _yaw_matrix(yaw_rad: float) -> np.ndarray:
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
+
+# Each corner radar's horizontal field of view (full width, centred on its boresight): twice the
+# one-way 3 dB half-beamwidth of the modelled antenna (RadarFrontEnd, 60 deg), as data sheets of
+# corner radars quote it (e.g. +-60 deg at -3 dB).  Recorded in the calibration as fov_azimuth_deg.
+RADAR_FOV_AZIMUTH_DEG = 2.0 * RadarFrontEnd().half_beam_azimuth_deg
+
+# The ego's body: a mid-size car (length, width, height, metres); the ego frame's origin is on the
+# ground under the midpoint of its front bumper, so the body's centre is at x = -length / 2.
+EGO_SIZE_M = np.array([4.7, 1.9, 1.5])
 
 # Sensor poses in the ego frame (x forward, y left, z up; origin under the front bumper).
 EGO_T_SENSOR: dict[str, SE3] = {
@@ -113,6 +123,7 @@ def calibration(profile: SimProfile) -> dict:
                 chirp_interval_s=params.chirp_interval_s,
                 range_window="hann",
                 doppler_window="hann",
+                fov_azimuth_deg=RADAR_FOV_AZIMUTH_DEG,
             )
         elif name == CAMERA:
             k, distortion = camera_intrinsics(profile)
@@ -129,6 +140,16 @@ def enu_T_ego(trajectory: Trajectory, t_s: np.ndarray) -> tuple[np.ndarray, np.n
     zero, one = np.zeros_like(yaw), np.ones_like(yaw)
     rotation = np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], -2)
     return rotation, trajectory.position_at(t_s)
+
+
+def ego_boxes(trajectory: Trajectory, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ego's body at times ``[T]``: centres ``[T, 3]`` (ENU, z at half height), size ``[3]``, yaws ``[T]``."""
+    yaw = trajectory.yaw_at(t_s)
+    center = trajectory.position_at(t_s).copy()
+    center[..., 0] -= EGO_SIZE_M[0] / 2 * np.cos(yaw)
+    center[..., 1] -= EGO_SIZE_M[0] / 2 * np.sin(yaw)
+    center[..., 2] = EGO_SIZE_M[2] / 2
+    return center, EGO_SIZE_M, yaw
 
 
 def sensor_poses_enu(trajectory: Trajectory, sensor: str, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,6 +1,10 @@
-"""Ray casting against oriented boxes and the ground plane (lidar and camera).
+"""Ray casting against oriented boxes and the ground plane: what each sensor can see.
 
-A numba kernel runs the slab test of every ray against every box: the numpy
+One world, one geometry for every sensor: the lidar and the camera cast rays
+(:func:`cast_rays`, first hit), the radars ask whether the straight path to each
+point scatterer is clear (:func:`line_of_sight`), both with the same slab test
+against the same boxes, so a car hidden behind a wall is hidden from both.
+Numba kernels run the slab test of every ray against every box: the numpy
 version needs ``[boxes, rays, 3]`` temporaries and was ~10x slower for camera
 frames (tens of thousands of rays against a few hundred boxes).
 """
@@ -109,3 +113,90 @@ def cast_rays(
     )
     mapped = np.where(hit >= 0, keep[np.maximum(hit, 0)] if keep.size else hit, hit)
     return distance, mapped, normal
+
+
+# A scatterer on a box's surface (a car's corner, bumper or side) is seen unless the path enters
+# that box more than this far before reaching it; rounding puts surface points within ~1e-12 m of
+# the face, and 1 cm is far below any feature the sensors resolve.
+SURFACE_TOLERANCE_M = 0.01
+
+
+@numba.njit(cache=True)
+def _clear(origin, points, owner, centers, half_sizes, cos_yaw, sin_yaw, tolerance):  # pragma: no cover - compiled
+    n_points = points.shape[0]
+    clear = np.ones(n_points, dtype=np.bool_)
+    for p in range(n_points):
+        dx, dy, dz = points[p, 0] - origin[0], points[p, 1] - origin[1], points[p, 2] - origin[2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length <= tolerance:
+            continue
+        # Parametrise the segment by distance from the origin: t in [0, length].
+        dx, dy, dz = dx / length, dy / length, dz / length
+        for b in range(centers.shape[0]):
+            if b == owner[p]:
+                continue
+            c, s = cos_yaw[b], sin_yaw[b]
+            ox, oy, oz = origin[0] - centers[b, 0], origin[1] - centers[b, 1], origin[2] - centers[b, 2]
+            lox, loy = c * ox + s * oy, -s * ox + c * oy
+            ldx, ldy = c * dx + s * dy, -s * dx + c * dy
+            t_near, t_far = 0.0, length - tolerance
+            for k in range(3):
+                o = lox if k == 0 else (loy if k == 1 else oz)
+                d = ldx if k == 0 else (ldy if k == 1 else dz)
+                h = half_sizes[b, k]
+                if abs(d) < 1e-12:
+                    if o < -h or o > h:
+                        t_near, t_far = 1.0, 0.0
+                        break
+                    continue
+                t1, t2 = (-h - o) / d, (h - o) / d
+                if t1 > t2:
+                    t1, t2 = t2, t1
+                t_near = max(t_near, t1)
+                t_far = min(t_far, t2)
+            if t_near < t_far:
+                clear[p] = False
+                break
+    return clear
+
+
+def line_of_sight(origin_enu: np.ndarray, points_enu: np.ndarray, boxes: BoxSet, owner_box: np.ndarray | None = None) -> np.ndarray:
+    """Whether the straight path from ``origin_enu`` to each point is clear of every box.
+
+    Parameters
+    ----------
+    origin_enu : numpy.ndarray
+        ``[3]`` sensor position, ENU metres.
+    points_enu : numpy.ndarray
+        ``[P, 3]`` scatterer positions, ENU metres.
+    boxes : BoxSet
+        Obstacles (static and moving, at the time of the look).
+    owner_box : numpy.ndarray, optional
+        ``[P]`` int64 index into ``boxes`` of a box that does not hide the point (the wall a facade
+        scatterer sits in, the pole it is on); -1 for none.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``[P]`` bool: no box is entered on the way, except within :data:`SURFACE_TOLERANCE_M` of the
+        point, so a car's scatterers on the side facing the sensor are seen and those on the far
+        side are hidden by the car itself.  The ground does not hide points above it.
+    """
+    origin = np.ascontiguousarray(origin_enu, dtype=np.float64)
+    points = np.ascontiguousarray(points_enu, dtype=np.float64).reshape(-1, 3)
+    owner = np.full(points.shape[0], -1, np.int64) if owner_box is None else np.asarray(owner_box, np.int64)
+    if not points.shape[0] or not boxes.center_enu.shape[0]:
+        return np.ones(points.shape[0], bool)
+    # Only boxes nearer than the farthest point can be in the way.
+    reach = float(np.max(np.linalg.norm(points - origin, axis=1)))
+    gap = np.linalg.norm(boxes.center_enu - origin, axis=1) - 0.5 * np.linalg.norm(boxes.size_m, axis=1)
+    keep = np.flatnonzero(gap < reach)
+    # Owners refer to the full box list: map them onto the kept boxes (-1 where culled).
+    position = np.full(boxes.center_enu.shape[0] + 1, -1, np.int64)
+    position[keep] = np.arange(keep.size)
+    owner_kept = np.where(owner >= 0, position[np.maximum(owner, 0)], -1)
+    return _clear(
+        origin, points, owner_kept,
+        np.ascontiguousarray(boxes.center_enu[keep]), np.ascontiguousarray(boxes.size_m[keep] / 2),
+        np.cos(boxes.yaw_rad[keep]), np.sin(boxes.yaw_rad[keep]), SURFACE_TOLERANCE_M,
+    )

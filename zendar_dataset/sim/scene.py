@@ -18,15 +18,16 @@ from zendar_dataset.geometry.quaternion import quat_wxyz_to_matrix
 from zendar_dataset.radar.range_doppler import range_doppler, range_profiles
 from zendar_dataset.sim import camera as camera_model
 from zendar_dataset.sim import ego as ego_model
-from zendar_dataset.sim.labels import label_rows
+from zendar_dataset.sim.labels import label_rows, radar_views
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
+from zendar_dataset.sim.raycast import line_of_sight
 from zendar_dataset.sim.rotate import compose, rotate, unrotate
 from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
-from zendar_dataset.sim.world import Road, World, build_static_world
+from zendar_dataset.sim.world import INTERSECTION_HALF_WIDTH_M, Road, World, build_static_world
 
 GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
 PAD_S = 1.5
@@ -66,6 +67,7 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
     turn = rng.random() < 0.5
     turn_start, turn_length = rng.uniform(5.0, 40.0), rng.uniform(15.0, 35.0)
     turn_kappa = rng.choice([-1.0, 1.0]) / rng.uniform(25.0, 60.0)
+    road_rng = rng
 
     def curvature(s: np.ndarray) -> np.ndarray:
         return np.where(turn & (s > turn_start) & (s < turn_start + turn_length), turn_kappa, 0.0)
@@ -79,12 +81,21 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
     road = Road.from_curvature(-120.0, road_end, curvature)
     ego = follow_road(road, time_s, speed, -cruise * PAD_S)
 
+    ego_start_s = -cruise * PAD_S
+    # Cross streets (where crossing and turning cars drive) every 60-150 m (city blocks) along the drive.
+    intersections = [ego_start_s + float(road_rng.uniform(10.0, 30.0))]
+    while intersections[-1] < ego_start_s + cruise * (duration + 2 * PAD_S) + 30.0:
+        intersections.append(intersections[-1] + float(road_rng.uniform(60.0, 150.0)))
+    gaps = [(s - INTERSECTION_HALF_WIDTH_M, s + INTERSECTION_HALF_WIDTH_M) for s in intersections]
     rng = stream_rng(seed, scene_index, "world")
-    boxes, scatterers = build_static_world(rng, road, -cruise * PAD_S - 40.0, road_end - 40.0, profile.facade_spacing_m)
+    boxes, scatterers = build_static_world(rng, road, ego_start_s - 40.0, road_end - 40.0, profile.facade_spacing_m, gaps)
     rng = stream_rng(seed, scene_index, "traffic")
     n_cars = int(rng.integers(profile.n_moving_cars[0], profile.n_moving_cars[1] + 1))
-    cars = make_traffic(rng, road, n_cars, -PAD_S, duration + 2 * PAD_S, -cruise * PAD_S, cruise)
-    world = World(road, boxes, scatterers, cars)
+    cars = make_traffic(
+        rng, road, n_cars, -PAD_S, duration + 2 * PAD_S, ego_start_s, cruise,
+        ego_boxes=lambda t: ego_model.ego_boxes(ego, t), static_boxes=boxes, intersections_s=intersections,
+    )
+    world = World(road, boxes, scatterers, cars, intersections)
 
     rng = stream_rng(seed, scene_index, "enu")
     enu = LocalENU(37.7749 + rng.uniform(-0.05, 0.05), -122.4194 + rng.uniform(-0.05, 0.05), 10.0)
@@ -115,11 +126,18 @@ def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_r
     static_mid = unrotate(rotation[mid], static.position_m - position[mid])
     reach = max_range_m + 1.0
     near = (static_mid[:, 0] > -1.0) & (np.linalg.norm(static_mid, axis=1) < reach)
+    moving_near = np.linalg.norm(moving_pos[:, mid] - position[mid], axis=1) < reach
+    # A return exists only where the path from the radar is clear at the middle time (the boxes
+    # move a few centimetres over a cube, at most ~2 m over the longest SAR aperture).
+    boxes = world.boxes_at(float(t_s[mid]))
+    near[near] = line_of_sight(position[mid], static.position_m[near], boxes, static.owner_box[near])
+    moving_near[moving_near] = line_of_sight(position[mid], moving_pos[moving_near, mid], boxes, moving.owner_box[moving_near])
+    moving_pos = moving_pos[moving_near]
     all_pos = np.concatenate([np.broadcast_to(static.position_m[near][:, None, :], (int(near.sum()), t_s.shape[0], 3)), moving_pos])
     local = unrotate(rotation, all_pos - position[None])
-    rcs = np.concatenate([static.rcs_m2[near], moving.rcs_m2])
-    swerling1 = np.concatenate([static.swerling1[near], moving.swerling1])
-    phase = np.concatenate([static.phase_rad[near], moving.phase_rad])
+    rcs = np.concatenate([static.rcs_m2[near], moving.rcs_m2[moving_near]])
+    swerling1 = np.concatenate([static.swerling1[near], moving.swerling1[moving_near]])
+    phase = np.concatenate([static.phase_rad[near], moving.phase_rad[moving_near]])
     if with_velocity:
         return local[:, :m], rcs, swerling1, phase, (local[:, m:] - local[:, :m]) / 1e-4
     return local, rcs, swerling1, phase
@@ -271,7 +289,8 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
     for t in camera_times:
         rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.CAMERA, np.array(t))
         writer.append_camera(ego_model.CAMERA, ns(t), camera_model.render(rays, rotation, position, truth.world.boxes_at(t)))
-    labels = label_rows(truth.world, truth.ego, sar_times, returns_per_sweep, [ns(t) for t in sar_times])
+    views = radar_views(ego_model.radar_params(profile).max_range_m)
+    labels = label_rows(truth.world, truth.ego, sar_times, returns_per_sweep, [ns(t) for t in sar_times], views)
     if with_labels:
         writer.write_labels(labels)
     return labels

@@ -9,8 +9,10 @@ position within ~1e-6 m of the smooth curve (well under the 3.9 mm wavelength).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING
 
+import numba
 import numpy as np
 
 if TYPE_CHECKING:  # world.py builds on Trajectory, so the import would be circular at run time
@@ -58,8 +60,17 @@ class Trajectory:
         """``[..., 3]`` ENU position at times ``[...]`` (held constant outside the span)."""
         return self._interp(self.position_enu, t_s)
 
+    @cached_property
+    def _yaw_unwrapped(self) -> np.ndarray:
+        # Unwrapped once: every sensor frame asks every car's yaw, often many times.
+        return np.unwrap(self.yaw_rad)
+
+    @cached_property
+    def _yaw_rate(self) -> np.ndarray:
+        return np.gradient(self._yaw_unwrapped, self.time_s)
+
     def yaw_at(self, t_s: np.ndarray) -> np.ndarray:
-        return self._interp(np.unwrap(self.yaw_rad), t_s)
+        return self._interp(self._yaw_unwrapped, t_s)
 
     def velocity_at(self, t_s: np.ndarray) -> np.ndarray:
         """``[..., 3]`` ENU velocity (m/s)."""
@@ -68,8 +79,7 @@ class Trajectory:
         return np.stack([speed * np.cos(yaw), speed * np.sin(yaw), np.zeros_like(speed)], axis=-1)
 
     def yaw_rate_at(self, t_s: np.ndarray) -> np.ndarray:
-        rate = np.gradient(np.unwrap(self.yaw_rad), self.time_s)
-        return self._interp(rate, t_s)
+        return self._interp(self._yaw_rate, t_s)
 
 
 def speed_profile(
@@ -94,7 +104,6 @@ def speed_profile(
     target = np.full(time_s.shape, float(cruise_mps))
     for stop_s, wait_s in stops:
         target[(time_s >= stop_s) & (time_s < stop_s + wait_s)] = 0.0
-    speed = np.empty_like(target)
     current = float(cruise_mps if start_mps is None else start_mps)
     step = accel_mps2 * SAMPLE_INTERVAL_S
     # Braking must start early enough to reach zero at the stop time.
@@ -102,10 +111,18 @@ def speed_profile(
         braking_s = cruise_mps / accel_mps2
         window = (time_s >= stop_s - braking_s) & (time_s < stop_s)
         target[window] = np.minimum(target[window], (stop_s - time_s[window]) * accel_mps2)
-    for i, goal in enumerate(target):
+    return time_s, _follow_target(target, current, step)
+
+
+@numba.njit(cache=True)
+def _follow_target(target: np.ndarray, current: float, step: float) -> np.ndarray:  # pragma: no cover - compiled
+    """Speeds that follow ``target`` changing by at most ``step`` per sample (a sequential recursion)."""
+    speed = np.empty_like(target)
+    for i in range(target.shape[0]):
+        goal = target[i]
         current = min(goal, current + step) if goal > current else max(goal, current - step)
         speed[i] = current
-    return time_s, speed
+    return speed
 
 
 def travelled_distance_m(time_s: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:

@@ -13,12 +13,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from zendar_dataset.sim.bodies import boxes_overlap
 from zendar_dataset.sim.rotate import rotate
 from zendar_dataset.sim.trajectory import Trajectory
 
 ROAD_STEP_M = 0.05
+
+# The street's cross section, lateral offsets from the ego lane's centre (left positive): the ego
+# lane and the oncoming lane (3.5 m, a US urban arterial lane), a parallel-parking strip beyond
+# each (NACTO Urban Street Design Guide: 7-9 ft, 2.1-2.7 m), a 0.3 m curb, a sidewalk of 2.5-4.5 m
+# (NACTO: 5-12 ft plus a furniture zone) whose poles and trees stand 0.6 m behind the curb, then
+# the facades.  Parked cars (<= 1.9 m wide) fit their strip; moving cars (<= 1.95 m) their lane.
 LANE_WIDTH_M = 3.5
-CURB_OFFSET_M = 5.5
+PARKING_WIDTH_M = 2.4
+CURB_WIDTH_M = 0.3
+SIDEWALK_WIDTH_M = (2.5, 4.5)
+FURNITURE_OFFSET_M = 0.6
+# A cross street (two 3.5 m lanes, sidewalks and corner radii) keeps this much arc length clear of
+# static bodies on both sides of the road, centred on the intersection.
+INTERSECTION_HALF_WIDTH_M = 11.0
 
 # Colours (RGB) used by the camera.
 COLORS = {
@@ -93,21 +106,27 @@ class ScattererSet:
         amplitude, uniform phase); otherwise it is steady (Swerling 0).
     phase_rad : numpy.ndarray
         ``[S]`` fixed reflection phase of steady scatterers.
+    owner_box : numpy.ndarray or None
+        ``[S]`` int64 index of the static box the scatterer lies on or in, which therefore does not
+        hide it (a facade's wall, a pole); -1 (or None for all) where every box may hide it.
     """
 
     position_m: np.ndarray
     rcs_m2: np.ndarray
     swerling1: np.ndarray
     phase_rad: np.ndarray
+    owner_box: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.position_m.shape[0]
-        if self.position_m.shape != (n, 3) or any(a.shape != (n,) for a in (self.rcs_m2, self.swerling1, self.phase_rad)):
-            raise ValueError("scatterer arrays must be [S, 3], [S], [S], [S]")
+        if self.owner_box is None:
+            self.owner_box = np.full(n, -1, np.int64)
+        if self.position_m.shape != (n, 3) or any(a.shape != (n,) for a in (self.rcs_m2, self.swerling1, self.phase_rad, self.owner_box)):
+            raise ValueError("scatterer arrays must be [S, 3], [S], [S], [S], [S]")
 
     @classmethod
     def empty(cls) -> ScattererSet:
-        return cls(np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool), np.zeros(0))
+        return cls(np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64))
 
     @classmethod
     def concatenate(cls, sets: list[ScattererSet]) -> ScattererSet:
@@ -117,6 +136,7 @@ class ScattererSet:
             np.concatenate([s.rcs_m2 for s in sets]),
             np.concatenate([s.swerling1 for s in sets]),
             np.concatenate([s.phase_rad for s in sets]),
+            np.concatenate([s.owner_box for s in sets]),
         )
 
 
@@ -168,12 +188,16 @@ class MovingCar:
 
 @dataclass
 class World:
-    """Everything in a scene except the ego vehicle."""
+    """Everything in a scene except the ego vehicle.
+
+    ``intersections_s``: arc lengths (m) of the cross streets, kept clear of static bodies.
+    """
 
     road: Road
     static_boxes: BoxSet
     static_scatterers: ScattererSet
     cars: list[MovingCar] = field(default_factory=list)
+    intersections_s: list[float] = field(default_factory=list)
 
     def boxes_at(self, t_s: float) -> BoxSet:
         """Static boxes plus every moving car's box at time ``t_s``."""
@@ -232,6 +256,13 @@ class World:
         )
 
 
+def street_edge_m(side: float) -> float:
+    """Lateral offset (m) of the road edge, the outer side of the parking strip, on ``side`` (+1 left, -1 right)."""
+    if side > 0:
+        return LANE_WIDTH_M * 1.5 + PARKING_WIDTH_M
+    return -(LANE_WIDTH_M / 2 + PARKING_WIDTH_M)
+
+
 def _scatterers(rng: np.random.Generator, position: np.ndarray, rcs_m2: np.ndarray, swerling1: np.ndarray) -> ScattererSet:
     n = position.shape[0]
     return ScattererSet(position.reshape(n, 3), rcs_m2.reshape(n), swerling1.reshape(n), rng.uniform(0, 2 * np.pi, n))
@@ -272,66 +303,137 @@ def _face_points(origin: np.ndarray, along: np.ndarray, length: float, spacing: 
     return pts.reshape(-1, 3)
 
 
-def build_static_world(rng: np.random.Generator, road: Road, s_start_m: float, s_end_m: float, facade_spacing_m: float) -> tuple[BoxSet, ScattererSet]:
-    """Facades, parked cars, poles, trees, curbs and guard rails along both sides of ``road``."""
-    boxes: list[BoxSet] = []
-    scatterers: list[ScattererSet] = []
+class _Placer:
+    """Static bodies placed so far; a candidate that would overlap one of them is refused."""
+
+    def __init__(self) -> None:
+        self.boxes: list[BoxSet] = []
+        self.scatterers: list[ScattererSet] = []
+        self._center: list[np.ndarray] = []
+        self._size: list[np.ndarray] = []
+        self._yaw: list[float] = []
+
+    def fits(self, box: BoxSet) -> bool:
+        if not self._center:
+            return True
+        return not np.any(boxes_overlap(box.center_enu[0], box.size_m[0], box.yaw_rad[0],
+                                        np.array(self._center), np.array(self._size), np.array(self._yaw)))
+
+    def add(self, box: BoxSet, scatterers: ScattererSet | None = None, *, owns_scatterers: bool = True) -> bool:
+        """Place ``box`` (and its scatterers) unless it overlaps a placed body; returns whether it was placed.
+
+        ``owns_scatterers``: the scatterers lie on or inside this box (a facade's wall, a pole), so
+        the box does not hide them from a sensor; a car's scatterers are on its surface and its
+        own body does hide those on its far side, so they are placed without an owner.
+        """
+        if not self.fits(box):
+            return False
+        index = sum(b.center_enu.shape[0] for b in self.boxes)
+        self.boxes.append(box)
+        self._center.append(box.center_enu[0])
+        self._size.append(box.size_m[0])
+        self._yaw.append(float(box.yaw_rad[0]))
+        if scatterers is not None:
+            n = scatterers.position_m.shape[0]
+            scatterers.owner_box = np.full(n, index if owns_scatterers else -1, np.int64)
+            self.scatterers.append(scatterers)
+        return True
+
+
+def _in_gap(s_lo: float, s_hi: float, gaps_s: list[tuple[float, float]]) -> tuple[float, float] | None:
+    for lo, hi in gaps_s:
+        if s_lo < hi and s_hi > lo:
+            return lo, hi
+    return None
+
+
+def build_static_world(
+    rng: np.random.Generator,
+    road: Road,
+    s_start_m: float,
+    s_end_m: float,
+    facade_spacing_m: float,
+    gaps_s: list[tuple[float, float]] = (),
+) -> tuple[BoxSet, ScattererSet]:
+    """Facades, parked cars, poles, trees, curbs and guard rails along both sides of ``road``.
+
+    The cross section (lateral offsets from the ego lane's centre, left positive) is
+    :func:`street_edges`: the two lanes, a parking strip beyond each, a curb, a sidewalk with
+    poles and trees, then the facades.  Nothing is placed over the arc-length intervals
+    ``gaps_s`` (cross streets), and no body overlaps another (on a curve, a block that would
+    overlap its neighbour is left out).
+
+    Returns
+    -------
+    boxes : BoxSet
+        The static boxes.
+    scatterers : ScattererSet
+        Their scatterers, ENU; ``owner_box`` indexes ``boxes`` (or -1, see :meth:`_Placer.add`).
+    """
+    placer = _Placer()
     for side in (1.0, -1.0):
-        # Own lane at 0, oncoming lane at +LANE_WIDTH_M: the left curb is further out.
-        curb = CURB_OFFSET_M if side > 0 else LANE_WIDTH_M / 2 + 0.3
-        facade = curb + rng.uniform(3.0, 5.0)
+        edge = street_edge_m(side)  # lateral offset of the road edge (inner face of the curb)
+        sidewalk = rng.uniform(*SIDEWALK_WIDTH_M)
+        facade = side * (abs(edge) + CURB_WIDTH_M + sidewalk)
         guard_rail = rng.random() < 0.25
         s = s_start_m
         while s < s_end_m:
             length = rng.uniform(8.0, 25.0)
+            gap = _in_gap(s, s + length, list(gaps_s))
+            if gap is not None:
+                s = gap[1] + rng.uniform(0.5, 4.0)
+                continue
             mid = s + length / 2
-            pos, yaw = road.point(mid, side * facade)
+            pos, yaw = road.point(mid, facade)
             tangent = np.array([np.cos(yaw), np.sin(yaw), 0.0])
             normal = np.array([-np.sin(yaw), np.cos(yaw), 0.0]) * side
             depth, height = 6.0, rng.uniform(6.0, 15.0)
-            boxes.append(_box(pos + normal * depth / 2 + [0, 0, height / 2], (length, depth, height), yaw, COLORS["building"]))
             start = pos - tangent * length / 2
             pts = _face_points(start, tangent, length, facade_spacing_m, np.array([0.4, 1.2, 2.2]))
             pts[:, :2] += rng.normal(0, 0.03, (pts.shape[0], 2))
             rcs = rng.lognormal(np.log(0.05), 1.0, pts.shape[0])
             strong = rng.random(pts.shape[0]) < 0.05  # window frames, door recesses: corner reflectors
             rcs[strong] = rng.uniform(2.0, 10.0, strong.sum())
-            scatterers.append(_scatterers(rng, pts, rcs, ~strong))
-            # Curb in front of the facade block.
-            cpos, _ = road.point(mid, side * curb)
-            boxes.append(_box(cpos + [0, 0, 0.075], (length, 0.3, 0.15), yaw, COLORS["curb"]))
+            placer.add(_box(pos + normal * depth / 2 + [0, 0, height / 2], (length, depth, height), yaw, COLORS["building"]),
+                       _scatterers(rng, pts, rcs, ~strong))
+            # Curb along the block, just outside the road edge.
+            cpos, _ = road.point(mid, side * (abs(edge) + CURB_WIDTH_M / 2))
             cpts = _face_points(cpos - tangent * length / 2, tangent, length, 0.5, np.array([0.1]))
-            scatterers.append(_scatterers(rng, cpts, rng.lognormal(np.log(0.02), 0.5, cpts.shape[0]), np.ones(cpts.shape[0], bool)))
+            placer.add(_box(cpos + [0, 0, 0.075], (length, CURB_WIDTH_M, 0.15), yaw, COLORS["curb"]),
+                       _scatterers(rng, cpts, rng.lognormal(np.log(0.02), 0.5, cpts.shape[0]), np.ones(cpts.shape[0], bool)))
             if guard_rail:
-                rpos, _ = road.point(mid, side * (curb - 0.3))
-                boxes.append(_box(rpos + [0, 0, 0.6], (length, 0.1, 0.3), yaw, COLORS["rail"]))
+                # A rail on the sidewalk, behind the curb (its posts stand 0.2 m back).
+                rpos, _ = road.point(mid, side * (abs(edge) + CURB_WIDTH_M + 0.2))
                 rpts = _face_points(rpos - tangent * length / 2, tangent, length, 0.3, np.array([0.6]))
-                scatterers.append(_scatterers(rng, rpts, rng.lognormal(np.log(0.2), 0.5, rpts.shape[0]), np.ones(rpts.shape[0], bool)))
+                placer.add(_box(rpos + [0, 0, 0.6], (length, 0.1, 0.3), yaw, COLORS["rail"]),
+                           _scatterers(rng, rpts, rng.lognormal(np.log(0.2), 0.5, rpts.shape[0]), np.ones(rpts.shape[0], bool)))
             else:
-                # Parked cars along the curb.
+                # Parked cars in the parking strip, centred in it.
                 along = s + rng.uniform(0.5, 3.0)
                 while along < s + length - 4.5:
                     if rng.random() < 0.6:
                         size = np.array([rng.uniform(4.0, 4.9), rng.uniform(1.7, 1.9), rng.uniform(1.4, 1.6)])
-                        ppos, pyaw = road.point(along + size[0] / 2, side * (curb - 1.2))
-                        boxes.append(_box(ppos + [0, 0, size[2] / 2], size, pyaw, COLORS["parked_car"]))
+                        ppos, pyaw = road.point(along + size[0] / 2, side * (abs(edge) - PARKING_WIDTH_M / 2))
                         body = car_scatterers(rng, size)
                         c, sn = np.cos(pyaw), np.sin(pyaw)
                         rot = np.array([[c, -sn, 0], [sn, c, 0], [0, 0, 1]])
                         body.position_m = rotate(rot, body.position_m) + ppos
-                        scatterers.append(body)
+                        placer.add(_box(ppos + [0, 0, size[2] / 2], size, pyaw, COLORS["parked_car"]), body, owns_scatterers=False)
                     along += rng.uniform(5.5, 8.0)
-            # Poles and trees on the sidewalk.
+            # Poles and trees in the sidewalk's furniture zone.
             for s_obj in np.arange(s + rng.uniform(0, 10.0), s + length, rng.uniform(10.0, 20.0)):
-                opos, oyaw = road.point(s_obj, side * (curb + 1.0))
+                opos, oyaw = road.point(s_obj, side * (abs(edge) + CURB_WIDTH_M + FURNITURE_OFFSET_M))
                 if rng.random() < 0.5:
-                    boxes.append(_box(opos + [0, 0, 2.5], (0.25, 0.25, 5.0), oyaw, COLORS["pole"]))
                     pts = opos + np.array([[0, 0, 0.5], [0, 0, 1.5]])
-                    scatterers.append(_scatterers(rng, pts, np.array([0.5, 0.5]), np.zeros(2, bool)))
+                    placer.add(_box(opos + [0, 0, 2.5], (0.25, 0.25, 5.0), oyaw, COLORS["pole"]),
+                               _scatterers(rng, pts, np.array([0.5, 0.5]), np.zeros(2, bool)))
                 else:
-                    boxes.append(_box(opos + [0, 0, 1.5], (0.4, 0.4, 3.0), oyaw, COLORS["trunk"]))
-                    boxes.append(_box(opos + [0, 0, 4.0], (3.0, 3.0, 2.5), oyaw, COLORS["canopy"]))
+                    trunk_top = 2.75  # where the canopy starts: trunk and canopy are one body
                     pts = opos + np.concatenate([[[0, 0, 0.8]], rng.uniform([-1.5, -1.5, 2.8], [1.5, 1.5, 5.0], (4, 3))])
-                    scatterers.append(_scatterers(rng, pts, np.array([0.3, 0.05, 0.05, 0.05, 0.05]), np.ones(5, bool)))
+                    trunk = _box(opos + [0, 0, trunk_top / 2], (0.4, 0.4, trunk_top), oyaw, COLORS["trunk"])
+                    canopy = _box(opos + [0, 0, trunk_top + 1.25], (3.0, 3.0, 2.5), oyaw, COLORS["canopy"])
+                    if placer.fits(trunk) and placer.fits(canopy):
+                        placer.add(trunk, _scatterers(rng, pts[:1], np.array([0.3]), np.ones(1, bool)))
+                        placer.add(canopy, _scatterers(rng, pts[1:], np.full(4, 0.05), np.ones(4, bool)))
             s += length + (rng.uniform(12.0, 16.0) if rng.random() < 0.15 else rng.uniform(0.5, 4.0))
-    return BoxSet.concatenate(boxes), ScattererSet.concatenate(scatterers)
+    return BoxSet.concatenate(placer.boxes), ScattererSet.concatenate(placer.scatterers)
