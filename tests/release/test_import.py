@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import shutil
 import json
 import pathlib
 
@@ -203,3 +204,71 @@ def test_row_major_pixels_are_detected_from_known_points(tmp_path, capsys):
     for m, frame in enumerate(truth.sar["right"][:5]):
         image = np.abs(reader.array("sar/right/image")[m])
         assert np.unravel_index(np.argmax(image), image.shape) == frame.bright_ij
+
+
+def test_validate_catches_detection_arrays_of_different_lengths(imported, tmp_path):
+    from tests.format.helpers import replace_array
+
+    _, _, out, _ = imported
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    store = copy / "scenes" / "2020-02-03_2252_001.zarr"
+    replace_array(store, "detections/left/snr", np.ones(5, np.float32))
+    replace_array(store, "detections/right/position_ecef", np.full((40, 3), np.nan))  # NaN allowed, 40 of 41 rows not
+    problems = validate_dataset(copy)
+    assert any("detections/left: expected every per-detection array to have the same rows" in p for p in problems)
+    assert any("detections/right" in p and "'position_ecef': 40" in p for p in problems)
+    assert not any("NaN" in p for p in problems)
+
+
+def test_hdf5_backend(tmp_path, capsys):
+    src = tmp_path / "release"
+    build_release(src, "2021")
+    status, _, err = run("import-release", src, tmp_path / "out", "--backend", "hdf5", "--scene-id", "drive-1", capsys=capsys)
+    assert status == 0, err
+    assert (tmp_path / "out" / "scenes" / "drive-1.h5").is_file()
+    assert validate_dataset(tmp_path / "out") == []
+    reader = open_dataset(tmp_path / "out").open_scene("drive-1")
+    assert reader.array("detections/left/position_ecef").shape == (41, 3)
+
+
+def test_ctrl_c_leaves_no_half_scene(tmp_path, capsys, monkeypatch):
+    from zendar_dataset.release import records
+
+    src = tmp_path / "release"
+    build_release(src)
+    real = records.lidar_sweep
+    calls = {"n": 0}
+
+    def interrupted(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 25:  # past the pixel-order probe, mid-way through writing lidar
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(records, "lidar_sweep", interrupted)
+    status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 130 and "Traceback" not in err
+    leftovers = list((tmp_path / "out" / "scenes").iterdir()) if (tmp_path / "out" / "scenes").exists() else []
+    assert leftovers == []
+    monkeypatch.setattr(records, "lidar_sweep", real)
+    status, _, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0 and validate_dataset(tmp_path / "out") == []
+
+
+def test_disk_full_exits_1_with_the_path(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from zendar_dataset.format.writer import SceneWriter
+
+    src = tmp_path / "release"
+    build_release(src)
+
+    def full(self, *args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(self.path))
+
+    monkeypatch.setattr(SceneWriter, "append_sar", full)
+    status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 1
+    assert err.strip().splitlines()[-1] == f"error: {tmp_path / 'out' / 'scenes' / '2020-02-03_2252_001.zarr'}: No space left on device"
+    assert list((tmp_path / "out" / "scenes").iterdir()) == []
