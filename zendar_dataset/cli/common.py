@@ -88,10 +88,14 @@ def writing(output: str | os.PathLike) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        if isinstance(exc, FileExistsError) and exc.filename is not None and os.path.abspath(
-            os.fspath(exc.filename)
-        ) == os.path.abspath(os.fspath(output)):
-            raise  # the output exists: the command says what to do about it
+        named = os.path.abspath(os.fspath(exc.filename)) if exc.filename is not None else None
+        target = os.path.abspath(os.fspath(output))
+        if isinstance(exc, FileExistsError) and named is not None:
+            if named == target:
+                raise  # the output exists: the command says what to do about it
+            if target.startswith(named + os.sep) and not os.path.isdir(named):
+                # mkdir(parents=True) says "File exists" for a parent that is a file.
+                exc = NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), exc.filename)
         if exc.errno in _WRITE_FAILURES or _is_about(exc, os.fspath(output)):
             raise OutputError(output, exc) from exc
         raise
