@@ -476,5 +476,11 @@ def consolidated_mismatches(location: str | os.PathLike, storage_options: dict |
             for path, node in walk(root)
         }
 
-    want, have = summary(actual.root), summary(consolidated.root)
+    try:
+        want, have = summary(actual.root), summary(consolidated.root)
+    except MetadataError:
+        return None  # unreadable metadata is reported by the metadata checks
+    finally:
+        consolidated.close()
+        actual.close()
     return sorted(path for path in set(want) | set(have) if want.get(path) != have.get(path))

@@ -1,0 +1,161 @@
+"""Broken datasets give named problems, never tracebacks: a root that is a file, unreadable
+dataset.json, corrupt array metadata (validate goes on listing the other problems), a corrupt
+HDF5 chunk index and absurd claimed sizes.  In the library each is a ZendarFormatError."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import pytest
+
+from tests.format.conftest import make_small_dataset
+from tests.format.helpers import set_attr
+from tests.reliability.outputs_helpers import assert_one_line_failure, run_in_process, run_tool
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.format import open_dataset
+from zendar_dataset.format.validate import validate_dataset
+
+
+@pytest.fixture(scope="module")
+def zarr_template(tmp_path_factory) -> pathlib.Path:
+    return make_small_dataset(tmp_path_factory.mktemp("template") / "ds", "zarr")
+
+
+@pytest.fixture
+def zarr_root(zarr_template, tmp_path) -> pathlib.Path:
+    import shutil
+
+    return pathlib.Path(shutil.copytree(zarr_template, tmp_path / "ds"))
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["info", "{root}"],
+        ["validate", "{root}"],
+        ["export-gt", "{root}", "--split", "train", "-o", "{out}/gt.json"],
+        ["convert", "{root}", "{out}/converted", "--to", "hdf5"],
+    ],
+    ids=["info", "validate", "export-gt", "convert"],
+)
+def test_a_root_that_is_a_file(tmp_path, command):
+    readme = tmp_path / "README.md"
+    readme.write_text("# not a dataset\n")
+    args = [part.format(root=readme, out=tmp_path) for part in command]
+    result = run_in_process("zendar-data", *args)
+    if command[0] == "validate":
+        assert result.returncode == 2 and "Traceback" not in result.stderr
+        assert f"{readme}: expected a dataset root directory, found a file" in result.stdout
+    else:
+        assert_one_line_failure(result, 2, f"{readme}: expected a dataset root directory, found a file")
+    with pytest.raises(ZendarFormatError, match="expected a dataset root directory, found a file"):
+        open_dataset(readme)
+
+
+def _not_utf8(path: pathlib.Path) -> None:
+    path.write_bytes(b'{"format": "zendar-dataset", "name": "\xff\xfe"}')
+
+
+def _directory(path: pathlib.Path) -> None:
+    path.unlink()
+    path.mkdir()
+
+
+def _deep(path: pathlib.Path) -> None:
+    path.write_text("[" * 100_000 + "]" * 100_000)
+
+
+@pytest.mark.parametrize(
+    ("breakage", "message"),
+    [
+        (_not_utf8, "dataset.json: expected UTF-8 text, found invalid start byte at byte 38"),
+        (_directory, "dataset.json: expected a JSON file, found a directory"),
+        (_deep, "dataset.json: expected JSON of reasonable depth, found nesting too deep to parse"),
+    ],
+    ids=["not-utf8", "a-directory", "nested-100k-levels"],
+)
+def test_unreadable_dataset_json(zarr_root, breakage, message):
+    breakage(zarr_root / "dataset.json")
+    with pytest.raises(ZendarFormatError, match=message):
+        open_dataset(zarr_root)
+    problems = validate_dataset(zarr_root)
+    assert len(problems) == 1 and message in problems[0]
+    assert_one_line_failure(run_in_process("zendar-data", "info", zarr_root), 2, message)
+
+
+def _edit_metadata(scene: pathlib.Path, array_path: str, edit) -> None:
+    path = scene / array_path / "zarr.json"
+    text = path.read_text()
+    path.write_text(edit(text))
+
+
+def _with(**changes):
+    return lambda text: json.dumps({**json.loads(text), **changes})
+
+
+CORRUPT_METADATA = {
+    "truncated": (lambda text: text[: len(text) // 2], "expected readable metadata, found JSONDecodeError"),
+    "empty-object": (lambda text: "{}", "expected readable metadata, found MetadataValidationError"),
+    "dtype-foo": (_with(data_type="foo"), "expected readable metadata, found ValueError: No Zarr data type found that matches 'foo'"),
+    "negative-shape": (_with(shape=[-5, 16, 8, 4]), "expected readable metadata, found ValueError"),
+    "zero-chunk": (
+        _with(chunk_grid={"name": "regular", "configuration": {"chunk_shape": [0, 16, 8, 4]}}),
+        "expected a chunk shape of positive sizes, found [0, 16, 8, 4]",
+    ),
+    "unknown-codec": (_with(codecs=[{"name": "nope"}]), "expected readable metadata, found UnknownCodecError"),
+    "group-not-array": (
+        lambda text: json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {}}),
+        "expected an array [N, any, any, any] complex64, found a group",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CORRUPT_METADATA))
+def test_corrupt_array_metadata_is_one_named_problem_among_the_others(zarr_root, case):
+    edit, message = CORRUPT_METADATA[case]
+    scene = zarr_root / "scenes" / "s0.zarr"
+    set_attr(scene, "", "time_reference", "utc")  # an unrelated problem that must still be listed
+    _edit_metadata(scene, "radar/left/cube", edit)
+    problems = validate_dataset(zarr_root)
+    assert any(p.startswith("s0: radar/left/cube: ") and message in p for p in problems), problems
+    assert "s0: /: expected attribute time_reference 'gps', found 'utc'" in problems
+    # The sibling radar and the other streams are still checked and read.
+    assert not any(p.startswith(("s0: radar/right", "s0: sar/", "s0: lidar/")) for p in problems), problems
+    with pytest.raises(ZendarFormatError) as info:
+        open_dataset(zarr_root).open_scene("s0")
+    assert any(message in p for p in info.value.problems)
+    result = run_in_process("zendar-data", "validate", zarr_root)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+
+
+def test_a_claimed_length_of_ten_to_the_fifteen(zarr_root):
+    scene = zarr_root / "scenes" / "s0.zarr"
+    _edit_metadata(scene, "radar/left/timestamp_ns", _with(shape=[10**15]))
+    problems = validate_dataset(zarr_root)
+    assert problems[0] == (
+        "s0: radar/left/timestamp_ns: expected a plausible size (at most 16777216 chunks and 1099511627776 bytes), "
+        "found shape [1000000000000000] in 250000000000000 chunks (8000000000000000 bytes); the metadata is likely corrupt"
+    )
+    with pytest.raises(ZendarFormatError, match="radar/left/timestamp_ns: expected a plausible size"):
+        open_dataset(zarr_root).open_scene("s0")
+
+
+def test_a_corrupt_hdf5_chunk_index(tmp_path):
+    root = make_small_dataset(tmp_path / "ds", "hdf5")
+    path = root / "scenes" / "s0.h5"
+    data = bytearray(path.read_bytes())
+    # Version-1 B-tree nodes ("TREE") index the chunks of every chunked array of the file.
+    trees = [i for i in range(len(data)) if data.startswith(b"TREE", i) and data[i + 4] == 1]  # type 1: chunks
+    assert trees, "expected v1 B-tree chunk indices in the file"
+    for start in trees:
+        data[start + 8 : start + 88] = b"\xee" * 80  # sibling addresses, keys and chunk addresses
+    path.write_bytes(bytes(data))
+    problems = validate_dataset(root)
+    assert "s0: radar/left/cube: expected a readable chunk index, found RuntimeError: Can't get number of chunks" in "\n".join(problems)
+    assert all(p.startswith("s0: ") and "expected a readable chunk index" in p for p in problems), problems
+    result = run_in_process("zendar-data", "validate", root)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    scene = open_dataset(root).open_scene("s0")  # metadata only: the index is read with the data
+    with pytest.raises(ZendarFormatError, match="s0: radar/left/cube: expected readable complex64 chunks, found a truncated or corrupt chunk"):
+        scene.array("radar/left/cube")[1]
