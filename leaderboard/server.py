@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import re
 import secrets
+import threading
 from dataclasses import dataclass
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -55,6 +56,9 @@ class ServerSettings:
         Submissions per team per rolling 30 days.
     max_bytes
         Largest accepted body.
+    parallel_checks
+        Uploads checked at the same time; more wait their turn. A parsed submission takes several
+        times its size in memory, so this bounds the server's memory to a few uploads' worth.
     """
 
     store: Store
@@ -62,9 +66,11 @@ class ServerSettings:
     scoring: ScoringService | None
     quota: int
     max_bytes: int
+    parallel_checks: int = 2
 
     def __post_init__(self) -> None:
         self.gt_frame_ids = list(self.test_split.frames)
+        self.check_slots = threading.BoundedSemaphore(self.parallel_checks)
 
 
 def _shape_problems(problems: list[str]) -> list[str]:
@@ -181,7 +187,10 @@ class Handler(BaseHTTPRequestHandler):
         if len(body) != length:
             self._error(HTTPStatus.BAD_REQUEST, f"the body ended after {len(body):,} of {length:,} bytes")
             return
-        checked = check_submission(body, self.settings.gt_frame_ids)
+        with self.settings.check_slots:
+            checked = check_submission(body, self.settings.gt_frame_ids)
+            if checked.ok:
+                checked.document = None  # only the bytes are kept
         if not checked.ok:
             n = len(checked.problems)
             self._error(
@@ -190,7 +199,6 @@ class Handler(BaseHTTPRequestHandler):
                 problems=_shape_problems(checked.problems),
             )
             return
-        del checked.document
         try:
             submission_id = self.settings.store.add_submission(team, body, checked.sha256, checked.meta, self.settings.quota)
         except QuotaExceeded:

@@ -62,6 +62,7 @@ CREATE TABLE IF NOT EXISTS scores (
     scored_at REAL NOT NULL
 );
 CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+INSERT OR IGNORE INTO settings (key, value) VALUES ('generation', '0');
 """
 
 
@@ -152,10 +153,20 @@ class Store:
             return self.db
 
         def __exit__(self, exc_type, exc, tb) -> None:
-            self.db.execute("ROLLBACK" if exc_type else "COMMIT")
+            if exc_type:
+                self.db.execute("ROLLBACK")
+                return
+            # Every change, from this process or an administrator's command, moves the generation
+            # on: readers cache what they built from the database until it moves.
+            self.db.execute("UPDATE settings SET value = CAST(value AS INTEGER) + 1 WHERE key = 'generation'")
+            self.db.execute("COMMIT")
 
     def _transaction(self) -> _Transaction:
         return Store._Transaction(self._connection())
+
+    def generation(self) -> int:
+        """A number that changes whenever anything in the database changes."""
+        return int(self._connection().execute("SELECT value FROM settings WHERE key = 'generation'").fetchone()[0])
 
     def close(self) -> None:
         db = getattr(self._local, "db", None)

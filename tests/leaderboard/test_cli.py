@@ -9,9 +9,13 @@ import shutil
 import socket
 import subprocess
 import sys
+from dataclasses import dataclass
 
-from tests.leaderboard.conftest import ground_truth, start_server, submission
+import pytest
+
+from tests.leaderboard.conftest import start_server, submission
 from tests.leaderboard.helpers import expected_ap
+from zendar_leaderboard.cli import main
 from zendar_leaderboard.ground_truth import divide_frames
 from zendar_leaderboard.store import Store
 
@@ -20,14 +24,30 @@ COMMAND = [shutil.which("zendar-leaderboard")] if shutil.which("zendar-leaderboa
 
 
 def run(*args, timeout=300):
+    """The installed command in a fresh process."""
     return subprocess.run(COMMAND + [str(a) for a in args], capture_output=True, text=True, timeout=timeout)
 
 
-def test_check_lists_every_problem_and_exits_2(tmp_path, gt_file):
+@dataclass
+class Completed:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def run_here(capsys, *args) -> Completed:
+    """``main`` in this process (no interpreter start-up): the same code path after argv."""
+    capsys.readouterr()
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return Completed(code, out, err)
+
+
+def test_check_lists_every_problem_and_exits_2(tmp_path, gt_file, capsys):
     gt_path, gt = gt_file
     good = tmp_path / "good.json"
     good.write_text(json.dumps(submission(gt)))
-    completed = run("check", good, "--gt", gt_path)
+    completed = run_here(capsys, "check", good, "--gt", gt_path)
     assert completed.returncode == 0, completed.stderr
     assert f"valid ({len(gt['frames'])} frames" in completed.stdout
     bad_document = submission(gt, method="m" * 41)
@@ -38,13 +58,13 @@ def test_check_lists_every_problem_and_exits_2(tmp_path, gt_file):
     assert completed.returncode == 2 and "Traceback" not in completed.stderr
     assert "2 problems found" in completed.stderr and "'method' has 41 characters" in completed.stderr
     # Without --gt the frames are not compared, and it says so.
-    completed = run("check", bad)
+    completed = run_here(capsys, "check", bad)
     assert completed.returncode == 2 and "'method' has 41" in completed.stderr and "missing from" not in completed.stderr
-    assert run("check", tmp_path / "missing.json").returncode == 2
-    assert run("check", good, "--max-bytes", "10").returncode == 2
+    assert run_here(capsys, "check", tmp_path / "missing.json").returncode == 2
+    assert run_here(capsys, "check", good, "--max-bytes", "10").returncode == 2
 
 
-def test_add_team_prints_the_token_once_and_stores_only_its_hash(tmp_path):
+def test_add_team_prints_the_token_once_and_stores_only_its_hash(tmp_path, capsys):
     db = tmp_path / "board.db"
     completed = run("add-team", "Radar Lab", "--db", db)
     assert completed.returncode == 0
@@ -53,11 +73,12 @@ def test_add_team_prints_the_token_once_and_stores_only_its_hash(tmp_path):
     assert Store(db).team_for_token(token).name == "Radar Lab"
     for path in tmp_path.iterdir():
         assert token.encode() not in path.read_bytes()
-    again = run("add-team", "Radar Lab", "--db", db)
+    again = run_here(capsys, "add-team", "Radar Lab", "--db", db)
     assert again.returncode == 2 and "already exists" in again.stderr
-    assert run("add-team", "x", "--db", tmp_path / "nowhere" / "b.db").returncode == 2
+    assert run_here(capsys, "add-team", "x", "--db", tmp_path / "nowhere" / "b.db").returncode == 2
 
 
+@pytest.mark.slow
 def test_submit_waits_and_prints_the_table_and_render_exports_it(tmp_path, gt_file):
     gt_path, gt = gt_file
     db = tmp_path / "board.db"
@@ -81,6 +102,7 @@ def test_submit_waits_and_prints_the_table_and_render_exports_it(tmp_path, gt_fi
         assert refused.returncode == 2 and "(422)" in refused.stderr and "is missing from predictions" in refused.stderr
     finally:
         server.stop()
+    assert server.process.returncode == 130  # Ctrl-C
     out = tmp_path / "site"
     completed = run("render", "--db", db, out)
     assert completed.returncode == 0, completed.stderr
@@ -96,18 +118,18 @@ def test_submit_waits_and_prints_the_table_and_render_exports_it(tmp_path, gt_fi
     assert (out / "entry" / f"{entry['id']}.html").read_text().count('href="../index.html"') == 1
 
 
-def test_environment_failures_exit_1_and_bad_ground_truth_exits_2(tmp_path, gt_file):
+def test_environment_failures_exit_1_and_bad_ground_truth_exits_2(tmp_path, gt_file, capsys):
     gt_path, _ = gt_file
-    gone = run("submit", gt_path, "--server", "http://127.0.0.1:9", "--token", "t")
+    gone = run_here(capsys, "submit", gt_path, "--server", "http://127.0.0.1:9", "--token", "t")
     assert gone.returncode == 1 and "cannot reach http://127.0.0.1:9" in gone.stderr
     bad_gt = tmp_path / "bad_gt.json"
     bad_gt.write_text('{"frames": {"s/1": [{"x": "near"}]}}')
-    completed = run("serve", "--gt", bad_gt, "--db", tmp_path / "b.db", "--port", "0")
+    completed = run_here(capsys, "serve", "--gt", bad_gt, "--db", tmp_path / "b.db", "--port", "0")
     assert completed.returncode == 2 and "Traceback" not in completed.stderr and "'x' must be a number" in completed.stderr
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        completed = run("serve", "--gt", gt_path, "--db", tmp_path / "b.db", "--port", port)
+        completed = run_here(capsys, "serve", "--gt", gt_path, "--db", tmp_path / "b.db", "--port", port)
     assert completed.returncode == 1 and f"cannot listen on 127.0.0.1:{port}" in completed.stderr
-    assert run("render", "--db", tmp_path / "none.db", tmp_path / "out").returncode == 2
+    assert run_here(capsys, "render", "--db", tmp_path / "none.db", tmp_path / "out").returncode == 2
