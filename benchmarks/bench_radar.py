@@ -19,10 +19,12 @@ with the same BLAS threads. Times are min / median / max over ``--repeat`` calls
 from __future__ import annotations
 
 import argparse
+import os
 
 import numpy as np
 import scipy.fft
 import scipy.ndimage
+import threadpoolctl
 from harness import Spread, interleaved, missing_peer, print_environment, print_load_after, time_calls
 
 from zendar_dataset.radar.cfar import CfarWindow, cfar_2d, cfar_alpha, default_os_rank
@@ -192,7 +194,7 @@ def cfar_rows(rng: np.random.Generator, repeat: int) -> list[Row]:
         },
         max(3, repeat // 6),
     )
-    rows.append((f"OS-CFAR 512x256 full threshold map", t["map"], "scipy.ndimage.rank_filter map", t["scipy"],
+    rows.append(("OS-CFAR 512x256 full threshold map", t["map"], "scipy.ndimage.rank_filter map", t["scipy"],
                  f"maps identical: {same_map}"))
     rows.append(("OS-CFAR 512x256 detection mask only", t["mask"], "scipy.ndimage.rank_filter map", t["scipy"],
                  f"different output (mask, no map); masks identical: {same_mask}"))
@@ -335,6 +337,9 @@ def main() -> None:
         rows = cuda_rows(args.batch, args.repeat)
     else:
         rows = range_doppler_rows(rng, args.repeat) + cfar_rows(rng, args.repeat) + doa_rows(rng, args.repeat)
+    blas = sum(pool["num_threads"] for pool in threadpoolctl.threadpool_info() if pool["user_api"] == "blas") or 1
+    print(f"threads: range-Doppler, package and plain scipy.fft, workers=-1 ({os.cpu_count()}); CFAR: package "
+          f"serial numba, numpy / scipy.ndimage / OpenRadar 1; DOA: numpy with {blas} BLAS thread(s) on both sides")
     print("times: median (min-max) ms over repeated calls; ratio = reference median / package median")
     print(f"{'case':<44} {'package ms':>22} {'reference':<42} {'ref ms':>24} {'ratio':>7}  note")
     for name, ours, ref_name, ref, note in rows:
