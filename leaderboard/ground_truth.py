@@ -22,7 +22,7 @@ from typing import Any
 
 import orjson
 
-from zendar_dataset.errors import ZendarError
+from zendar_dataset.errors import PredictionsError, ZendarError
 from zendar_dataset.eval.evaluate import load_ground_truth, scene_of
 from zendar_dataset.eval.validation import load_document
 
@@ -116,12 +116,14 @@ def load_test_split(source: str | os.PathLike, split: str | None = None) -> Test
 
     Raises
     ------
-    ZendarError
+    PredictionsError
         Listing every problem in the labels (``problems``).
+    ZendarError
+        When the labels hold no frame.
     """
     checked = load_ground_truth(source, split=split)
-    if checked.problems:
-        raise ZendarError(f"ground truth {str(source)!r}: " + "; ".join(checked.problems[:5]))
+    if checked.problems:  # each already names the file or dataset
+        raise PredictionsError("; ".join(checked.problems[:5]), checked.problems)
     if Path(source).is_dir():
         from zendar_dataset.format.ground_truth import ground_truth_frames
 

@@ -166,3 +166,21 @@ def test_shown_score_of_a_hand_worked_case():
 def test_ap_points_round_to_a_tenth():
     assert ap_points(0.83333) == 83.3 and ap_points(0.55556) == 55.6 and ap_points(1.0) == 100.0
     assert ap_points(0.0) == 0.0 and ap_points(None) is None
+
+
+def test_labels_from_a_dataset_root_and_from_export_gt_have_one_checksum(tmp_path):
+    from tests.eval.test_eval_dataset_root import frame, make_dataset
+    from zendar_dataset.format.ground_truth import export_ground_truth
+    from zendar_leaderboard.ground_truth import load_test_split
+
+    root = make_dataset(tmp_path / "ds", test_labelled=True)
+    export_ground_truth(root, "test", tmp_path / "gt.json")
+    from_root = load_test_split(root, "test")
+    from_file = load_test_split(tmp_path / "gt.json")
+    assert from_root.sha256 == from_file.sha256 and from_root.split == "test"
+    # One scene of two frames: the earlier frame is public, the later private.
+    assert from_root.public_frame_ids == (frame("t0", 0),) and from_root.private_frame_ids == (frame("t0", 1),)
+    from zendar_dataset.errors import ZendarError
+
+    with pytest.raises(ZendarError, match="labels withheld"):
+        load_test_split(make_dataset(tmp_path / "unlabelled", test_labelled=False), "test")
