@@ -233,25 +233,25 @@ def test_hdf5_backend(tmp_path, capsys):
 
 
 def test_ctrl_c_leaves_no_half_scene(tmp_path, capsys, monkeypatch):
-    from zendar_dataset.release import records
+    from zendar_dataset.format.writer import SceneWriter
 
     src = tmp_path / "release"
     build_release(src)
-    real = records.lidar_sweep
+    real = SceneWriter.append_lidar
     calls = {"n": 0}
 
-    def interrupted(*args, **kwargs):
+    def interrupted(self, *args, **kwargs):
         calls["n"] += 1
-        if calls["n"] == 25:  # past the pixel-order probe, mid-way through writing lidar
+        if calls["n"] == 5:  # mid-way through the scene, SAR and radar already written
             raise KeyboardInterrupt
-        return real(*args, **kwargs)
+        return real(self, *args, **kwargs)
 
-    monkeypatch.setattr(records, "lidar_sweep", interrupted)
+    monkeypatch.setattr(SceneWriter, "append_lidar", interrupted)
     status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
     assert status == 130 and "Traceback" not in err
     leftovers = list((tmp_path / "out" / "scenes").iterdir()) if (tmp_path / "out" / "scenes").exists() else []
     assert leftovers == []
-    monkeypatch.setattr(records, "lidar_sweep", real)
+    monkeypatch.setattr(SceneWriter, "append_lidar", real)
     status, _, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
     assert status == 0 and validate_dataset(tmp_path / "out") == []
 

@@ -424,27 +424,34 @@ class _SceneImport:
         return out
 
     def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
-        """Check the pixel order against this radar's detections and the lidar (see ``pixel_order.py``)."""
+        """Check the pixel order against this radar's detections, then the lidar if still undecided (``pixel_order.py``)."""
         frames = []
         for _, record in _decoded(opened, count=False):
             frames.append(rec.sar_frame(opened.stream.kind, record))
             if len(frames) >= 20:
                 break
-        probes = []
+        if not frames:
+            return True
+        last_s = max(f.timestamp_s for f in frames) + 1.0
+        probes: list[tuple[float, np.ndarray]] = []
+        i_fastest, evidence = None, "no detections or lidar points to check against"
         for source in ([points] if points else []) + lidars:
             for offset, buf, start, end in _iter(source, count=False):
                 try:
                     if source.stream.kind.name == "TrackerState":
                         found = rec.detections(source.stream.kind, buf, start, end)
-                        probes.append((found.timestamp_s, found.columns["position_ecef"]))
+                        probe = (found.timestamp_s, found.columns["position_ecef"])
                     else:
                         sweep = rec.lidar_sweep(source.stream.kind, buf, start, end)
-                        probes.append((sweep.timestamp_s, sweep.position_ecef))
+                        probe = (sweep.timestamp_s, sweep.position_ecef)
                 except WireError:
                     continue  # reported when the stream itself is imported
-                if len(probes) >= 200:
+                if probe[0] > last_s:
                     break
-        i_fastest, evidence = vote_pixel_order(frames, probes)
+                probes.append(probe)
+            i_fastest, evidence = vote_pixel_order(frames, probes)
+            if i_fastest is not None:
+                break
         if i_fastest is None:
             self.summary.assumptions.append(
                 f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; not verifiable here: {evidence})"
