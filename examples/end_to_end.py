@@ -6,7 +6,8 @@ A dataset to try it on: ``zendar-data synth /tmp/demo --profile demo --scenes 2`
 
 The detector here is a deliberately simple classical one, written to show the
 package's pieces working together; it is *not* the paper's baseline (CFAR +
-SAR-mask auto-labels + CNN, see ``baselines/``). Per SAR frame it:
+SAR-mask auto-labels + CNN, see ``baselines/``); its functions live in
+``zendar_dataset.classical_detector``. Per SAR frame it:
 
 1. takes each radar's latest range-Doppler cube (the loader synchronises them);
 2. finds peaks with CA-CFAR and their azimuth with Bartlett beamforming;
@@ -26,70 +27,15 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from sklearn.cluster import DBSCAN
 from torch.utils.data import DataLoader
 
 from zendar_dataset import ZendarDataset
+from zendar_dataset.classical_detector import cluster_cars, mount_velocity_ego, moving_points  # noqa: F401 (re-exported)
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import format_table, prepare_out_dir, write_atomically, write_metrics
 from zendar_dataset.format import frame_id
-from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
-from zendar_dataset.radar import FmcwParams, detect, detections_to_points, estimate_azimuth
-
-CFAR_PFA = 1e-4
-# A detection is "moving" when its radial velocity is this far from the static-world value:
-# about two Doppler bins of the demo profile, above the spread that DOA errors cause on clutter.
-MIN_RADIAL_SPEED_MPS = 1.5
-CLUSTER_EPS_M = 1.5  # about half a car length: one car's scatterers chain into one cluster
-VELOCITY_HALF_STEP_NS = 50_000_000  # central difference over +-50 ms of tracklog
-
-
-def mount_velocity_ego(poses: EgoPoses, point_ego: np.ndarray, timestamp_ns: int) -> np.ndarray:
-    """Velocity over ground [3] (m/s, ego axes at ``timestamp_ns``) of a point fixed to the car.
-
-    A central difference of interpolated poses, so it includes the yaw rate's
-    contribution at the radar's mounting point.
-    """
-    start, end = poses.tracklog.span_ns
-    t0 = max(start, timestamp_ns - VELOCITY_HALF_STEP_NS)
-    t1 = min(end, timestamp_ns + VELOCITY_HALF_STEP_NS)
-    displacement_ecef = poses.ego_to_ecef(point_ego, t1) - poses.ego_to_ecef(point_ego, t0)
-    velocity_ecef = displacement_ecef / ((t1 - t0) * 1e-9)
-    return poses.ecef_T_ego(timestamp_ns).inverse().rotate_vectors(velocity_ecef)
-
-
-def moving_points(cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses) -> tuple[np.ndarray, np.ndarray]:
-    """Moving detections of one cube [R, D, A]: points_ego [M, 3] at the cube's time and SNR [M] (linear)."""
-    params = FmcwParams.from_calibration(calibration, n_samples=cube.shape[0], n_chirps=cube.shape[1])
-    found = detect(cube, params, method="ca", pfa=CFAR_PFA)
-    snapshots = cube[found.range_bin, found.doppler_bin]  # [N, A]
-    azimuth_rad = estimate_azimuth(snapshots, params.rx_positions_m, params.wavelength_m)
-    ego_T_radar = ego_T_sensor(calibration)
-    points_ego = detections_to_points(found.range_m, azimuth_rad, ego_T_radar)
-
-    # A static point's range changes at -(line of sight . radar velocity).
-    radar_velocity_ego = mount_velocity_ego(poses, ego_T_radar.translation, timestamp_ns)
-    line_of_sight_radar = np.stack([np.cos(azimuth_rad), np.sin(azimuth_rad), np.zeros_like(azimuth_rad)], axis=1)
-    static_mps = -ego_T_radar.rotate_vectors(line_of_sight_radar) @ radar_velocity_ego
-    # Doppler is ambiguous modulo D bins: compare velocities on that circle.
-    span_mps = cube.shape[1] * params.doppler_bin_mps
-    residual_mps = (found.velocity_mps - static_mps + span_mps / 2) % span_mps - span_mps / 2
-    moving = np.abs(residual_mps) > MIN_RADIAL_SPEED_MPS
-    return points_ego[moving], 10.0 ** (found.snr_db[moving] / 10.0)
-
-
-def cluster_cars(points_ego: np.ndarray, snr: np.ndarray) -> list[dict[str, float]]:
-    """One prediction per DBSCAN cluster: SNR-weighted centre, score = summed linear SNR."""
-    if len(points_ego) == 0:
-        return []
-    labels = DBSCAN(eps=CLUSTER_EPS_M, min_samples=1).fit_predict(points_ego[:, :2])
-    cars = []
-    for label in np.unique(labels):
-        members = labels == label
-        centre = np.average(points_ego[members, :2], axis=0, weights=snr[members])
-        cars.append({"x": float(centre[0]), "y": float(centre[1]), "score": float(snr[members].sum())})
-    return cars
+from zendar_dataset.geometry.frames import EgoPoses
 
 
 def main(argv: list[str] | None = None) -> int:

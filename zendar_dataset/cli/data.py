@@ -18,6 +18,7 @@ import sys
 from zendar_dataset.cli import (
     data_convert,
     data_export_gt,
+    data_fidelity,
     data_import_release,
     data_info,
     data_synth,
@@ -25,7 +26,7 @@ from zendar_dataset.cli import (
 )
 from zendar_dataset.cli.common import run_cli
 
-SUBCOMMANDS = (data_info, data_validate, data_convert, data_export_gt, data_synth, data_import_release)
+SUBCOMMANDS = (data_info, data_validate, data_convert, data_export_gt, data_synth, data_import_release, data_fidelity)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -87,6 +87,35 @@ def visible_scatterers(world: World, ego, t_s: float, views: list[RadarView]) ->
     return counts
 
 
+def annotatable_cars(world: World, ego, t_s: float, views: list[RadarView]) -> list[tuple[int, int]]:
+    """The cars an annotator labels at ``t_s`` (the rule of this module's docstring).
+
+    Returns
+    -------
+    list of (int, int)
+        Index into ``world.cars`` and the most scatterers any one radar sees of it, per labelled car.
+    """
+    t = np.array(float(t_s))
+    rotation, translation = ego_model.enu_T_ego(ego, t)
+    seen = visible_scatterers(world, ego, float(t_s), views)
+    poses = [ego_model.sensor_poses_enu(ego, view.name, t) for view in views]
+    out = []
+    for i, car in enumerate(world.cars):
+        velocity = car.trajectory.velocity_at(t)
+        if np.hypot(velocity[0], velocity[1]) <= MIN_SPEED_MPS:
+            continue
+        center_enu = car.trajectory.position_at(t)
+        if unrotate(rotation, center_enu - translation)[0] <= 0.0:
+            continue
+        labelled = False
+        for j, (view, (sensor_rotation, origin)) in enumerate(zip(views, poses)):
+            center_sensor = unrotate(sensor_rotation, center_enu + [0.0, 0.0, car.size_m[2] / 2] - origin)
+            labelled |= bool(view.sees(center_sensor)) and seen[i, j] >= MIN_RADAR_SCATTERERS
+        if labelled:
+            out.append((i, int(seen[i].max())))
+    return out
+
+
 def label_rows(
     world: World,
     ego,
@@ -112,29 +141,17 @@ def label_rows(
         lidar_counts = lidar_returns[float(sweep_times[np.argmin(np.abs(sweep_times - t))])] if sweep_times.size else None
         rotation, translation = ego_model.enu_T_ego(ego, np.array(t))
         ego_yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
-        seen = visible_scatterers(world, ego, float(t), views)
-        for i, car in enumerate(world.cars):
+        for i, n_seen in annotatable_cars(world, ego, float(t), views):
+            car = world.cars[i]
             velocity = car.trajectory.velocity_at(np.array(t))
-            if np.hypot(velocity[0], velocity[1]) <= MIN_SPEED_MPS:
-                continue
-            center_enu = car.trajectory.position_at(np.array(t))
-            center_ego = unrotate(rotation, center_enu - translation)
-            if center_ego[0] <= 0.0:
-                continue
-            labelled = False
-            for j, view in enumerate(views):
-                sensor_rotation, origin = ego_model.sensor_poses_enu(ego, view.name, np.array(t))
-                center_sensor = unrotate(sensor_rotation, center_enu + [0.0, 0.0, car.size_m[2] / 2] - origin)
-                labelled |= bool(view.sees(center_sensor)) and seen[i, j] >= MIN_RADAR_SCATTERERS
-            if not labelled:
-                continue
+            center_ego = unrotate(rotation, car.trajectory.position_at(np.array(t)) - translation)
             velocity_ego = unrotate(rotation, velocity)
             yaw = float(np.angle(np.exp(1j * (float(car.trajectory.yaw_at(np.array(t))) - ego_yaw))))
             n_lidar = int(lidar_counts[car.track_id]) if lidar_counts is not None and car.track_id < lidar_counts.size else 0
             for name, value in (("timestamp_ns", stamp), ("x", center_ego[0]), ("y", center_ego[1]),
                                 ("length", car.size_m[0]), ("width", car.size_m[1]), ("yaw", yaw),
                                 ("vx", velocity_ego[0]), ("vy", velocity_ego[1]), ("track_id", car.track_id),
-                                ("num_radar_scatterers", int(seen[i].max())), ("num_lidar_points", n_lidar)):
+                                ("num_radar_scatterers", n_seen), ("num_lidar_points", n_lidar)):
                 rows[name].append(value)
     return {
         name: np.asarray(values, dtype=np.int64 if name in ("timestamp_ns", "track_id", *OPTIONAL_FIELDS) else np.float64)

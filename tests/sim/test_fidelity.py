@@ -1,0 +1,92 @@
+"""``zendar-data fidelity`` on a tiny simulated dataset: exit 0, every key of fidelity.json, all labels
+inside a radar's field of view (recomputed here from the calibration), no visible moving car without
+a label; and a label moved behind the ego shows up in the report."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from zendar_dataset.cli.data import main
+from zendar_dataset.fidelity import fidelity_report
+from zendar_dataset.format import open_dataset
+from zendar_dataset.sim.generate import synthesize_dataset
+
+KEYS = {
+    "root", "split", "scenes", "frames", "truth", "bands_m", "labels_per_band", "labels_in_radar_fov", "labels_behind_ego",
+    "visible_moving_cars", "visible_moving_cars_without_label", "sar_coverage_within_60m", "cfar_detection_rate",
+    "cfar_detections", "moving_vs_static_auc", "end_to_end_ap",
+}
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fidelity") / "tiny"
+    synthesize_dataset(root, "tiny", n_scenes=2, seed=11, split_ratios=(1, 0, 0), progress=False)
+    return root
+
+
+def _labels_in_view_by_hand(root) -> tuple[int, int]:
+    """Labels whose centre lies within half the field of view of a radar's boresight (yaw from the quaternion)."""
+    index = open_dataset(root)
+    inside = total = 0
+    for scene_id in index.scene_ids():
+        with index.open_scene(scene_id) as scene:
+            labels = scene.labels()
+            radars = scene.sensors("radar")
+            sensors = {r: scene.calibration.sensors[r] for r in radars}
+            for x, y in zip(labels["x"], labels["y"]):
+                total += 1
+                for r in radars:
+                    w, qx, qy, qz = sensors[r].rotation_wxyz
+                    boresight = np.arctan2(2 * (w * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+                    dx, dy = x - sensors[r].translation_m[0], y - sensors[r].translation_m[1]
+                    azimuth = np.angle(np.exp(1j * (np.arctan2(dy, dx) - boresight)))
+                    if abs(np.degrees(azimuth)) <= sensors[r].fov_azimuth_deg / 2:
+                        inside += 1
+                        break
+    return inside, total
+
+
+def test_the_fidelity_command_reports_every_key_and_labels_all_in_view(tiny_root, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["fidelity", str(tiny_root), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "labels in a radar's field of view: 100.0%" in printed
+    report = json.loads((out / "fidelity.json").read_text())
+    assert KEYS <= set(report)
+    inside, total = _labels_in_view_by_hand(tiny_root)
+    assert total > 0 and inside == total
+    assert report["labels_in_radar_fov"] == {"in_view": total, "labels": total, "share": 1.0}
+    assert report["labels_behind_ego"] == 0
+    assert report["truth"] is True
+    assert report["visible_moving_cars_without_label"] == 0
+    assert report["visible_moving_cars"] == total
+    assert sum(report["labels_per_band"].values()) == total
+    for band in ("near", "mid", "far", "all"):
+        assert set(report["moving_vs_static_auc"]["sar_mask"]) >= {band}
+        assert set(report["end_to_end_ap"]) >= {band}
+
+
+def test_a_label_moved_behind_the_ego_is_counted_out_of_view(tiny_root, monkeypatch):
+    """The reader hands each scene's first label moved to (-8, 0) (behind the ego): the report must see them."""
+    from zendar_dataset.format.reader import SceneReader
+
+    original = SceneReader.labels
+    moved_scenes = set()
+
+    def moved(self):
+        labels = original(self)
+        if labels is not None and labels["x"].size:
+            labels = dict(labels, x=labels["x"].copy(), y=labels["y"].copy())
+            labels["x"][0], labels["y"][0] = -8.0, 0.0
+            moved_scenes.add(self.scene_id)
+        return labels
+
+    monkeypatch.setattr(SceneReader, "labels", moved)
+    report = fidelity_report(tiny_root)
+    assert moved_scenes
+    assert report["labels_behind_ego"] == len(moved_scenes)
+    assert report["labels_in_radar_fov"]["in_view"] == report["labels_in_radar_fov"]["labels"] - len(moved_scenes)
