@@ -337,7 +337,8 @@ def main() -> None:
         rows = cuda_rows(args.batch, args.repeat)
     else:
         rows = range_doppler_rows(rng, args.repeat) + cfar_rows(rng, args.repeat) + doa_rows(rng, args.repeat)
-    blas = sum(pool["num_threads"] for pool in threadpoolctl.threadpool_info() if pool["user_api"] == "blas") or 1
+    # numpy and scipy may each load a BLAS of their own, with the same thread count.
+    blas = max((pool["num_threads"] for pool in threadpoolctl.threadpool_info() if pool["user_api"] == "blas"), default=1)
     print(f"threads: range-Doppler, package and plain scipy.fft, workers=-1 ({os.cpu_count()}); CFAR: package "
           f"serial numba, numpy / scipy.ndimage / OpenRadar 1; DOA: numpy with {blas} BLAS thread(s) on both sides")
     print("times: median (min-max) ms over repeated calls; ratio = reference median / package median")
