@@ -193,3 +193,32 @@ def test_gps_seconds_to_ns_rounds_the_exact_double_to_the_nearest_ns(seconds):
     nearest = math.floor(exact + Fraction(1, 2))
     assert gps_seconds_to_ns(seconds) == nearest
     assert abs(Fraction(gps_seconds_to_ns(seconds)) - exact) <= Fraction(1, 2)
+
+
+def test_lidar_columns_match_the_encoded_values_across_layouts(tmp_path):
+    # Intensities of one and two varint bytes, uniform and uneven spacing, and one point whose
+    # local position is left out (a layout of its own): every value must come back where it was.
+    from zendar_dataset.release.records import lidar_sweep
+
+    rng = np.random.default_rng(3)
+    n = 500
+    t = 1.26e9 + rng.uniform(0, 0.1, n)
+    g = np.asarray(POS) + rng.normal(size=(n, 3))
+    local = rng.normal(size=(n, 3))
+    intensity = rng.integers(0, 300, n)
+    points = [enc.lidar_point(t[k], g[k], local[k], int(intensity[k])) for k in range(n)]
+    points[300] = enc.f64(1, t[300]) + enc.ld(2, enc.vec3(*g[300])) + enc.uvar(4, int(intensity[300]))  # no position_local (past the points sniffing samples)
+    path = enc.write_stream(tmp_path / "lidar.pbs", [enc.lidar_frame(1.26e9, points)])
+    with ReleaseStream(path, kind="LidarPointsFrame") as stream:
+        (_, buf, start, end), = list(stream.records())
+        with pytest.raises(WireError, match="missing required field position_local"):
+            lidar_sweep(stream.kind, buf, start, end)  # the final layout requires it
+    points[300] = enc.lidar_point(t[300], g[300], local[300], 127)
+    intensity[300] = 127
+    path = enc.write_stream(tmp_path / "lidar.pbs", [enc.lidar_frame(1.26e9, points)])
+    with ReleaseStream(path) as stream:
+        (_, buf, start, end), = list(stream.records())
+        sweep = lidar_sweep(stream.kind, buf, start, end)
+    np.testing.assert_array_equal(sweep.position_ecef, g)
+    np.testing.assert_array_equal(sweep.position_local, local)
+    np.testing.assert_array_equal(sweep.intensity, intensity)

@@ -146,20 +146,23 @@ def _finish(opened: _Opened) -> None:
         opened.summary.skipped.extend(f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses)
 
 
-def _iter(opened: _Opened, count: bool = True):
-    """Raw records ``(offset, buf, start, end)`` of a stream, counted in its summary unless ``count`` is False."""
+def _iter(opened: _Opened, probe: bool = False):
+    """Raw records ``(offset, buf, start, end)`` of a stream, counted in its summary unless ``probe``
+    (a look-ahead pass: the writing pass counts and reports)."""
     for item in opened.stream.records():
-        opened.summary.records += count
+        opened.summary.records += not probe
         yield item
 
 
-def _decoded(opened: _Opened, count: bool = True):
-    """Decoded records ``(offset, dict)``; one that does not decode is skipped (``skip_corrupt``) or raises."""
-    for offset, buf, start, end in _iter(opened, count):
+def _decoded(opened: _Opened, probe: bool = False):
+    """Decoded records ``(offset, dict)``; one that does not decode is skipped (``skip_corrupt``) or raises,
+    except in a ``probe`` pass, which leaves it to the writing pass."""
+    for offset, buf, start, end in _iter(opened, probe):
         try:
             yield offset, decode(opened.stream.kind.message, buf, start, end)
         except WireError as exc:
-            opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+            if not probe:
+                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
 
 
 class _Stamps:
@@ -227,7 +230,7 @@ def _infer_sides(images: dict[str, _Opened], scene: SceneSummary) -> dict[str, s
     evidence = {}
     for serial, opened in images.items():
         right = []
-        for _, record in _decoded(opened, count=False):
+        for _, record in _decoded(opened, probe=True):
             frame = rec.sar_frame(opened.stream.kind, record)
             centre = frame.origin_ecef + frame.rows / 2 * frame.di_ecef + frame.cols / 2 * frame.dj_ecef
             q = frame.attitude_wxyz
@@ -261,7 +264,7 @@ def _enu_origin(tracklog, images: dict[str, _Opened], scene: SceneSummary) -> di
         anchor, what = tracklog[1][0], "the first tracklog position"
     else:
         for opened in images.values():
-            for _, record in _decoded(opened, count=False):
+            for _, record in _decoded(opened, probe=True):
                 frame = rec.sar_frame(opened.stream.kind, record)
                 if np.all(np.isfinite(frame.origin_ecef)):
                     anchor, what = frame.origin_ecef, "the first SAR image origin"
@@ -351,7 +354,10 @@ class _SceneImport:
         points = self._keyed(self._by_kind("TrackerState"), "_points")
         rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
         sides = _infer_sides(images, scene)
-        rename = lambda serial: sides.get(serial, serial)  # noqa: E731
+
+        def rename(serial: str) -> str:
+            return sides.get(serial, serial)
+
         models = self._models(list(rd_frames))
         radars = sorted({rename(s) for s in images} | {rename(s) for s in points} | set(rd_frames))
         calibration = {"imu": {"rotation_wxyz": list(EGO_Q_IMU_WXYZ), "translation_m": [0.0, 0.0, 0.0]}}
@@ -390,7 +396,9 @@ class _SceneImport:
             name = _prefix(item.path, suffix) if suffix else None
             if name is None:
                 stem = item.path.name.split(".")[0]
-                name = stem if stem not in ("stream",) else "_".join(item.path.relative_to(self.source.folder).parts[:-1]) or stem
+                # Raw-acquisition layout: <sensor>/<NN>/stream.pbs is named by its folders.
+                folders = "_".join(item.path.relative_to(self.source.folder).parts[:-1])
+                name = folders if stem == "stream" and folders else stem
             name = re.sub(r"[^A-Za-z0-9_-]+", "_", name)
             if name in out:
                 item.summary.skipped.append(f"a second stream for sensor {name!r}; {out[name].summary.path} was used")
@@ -426,7 +434,7 @@ class _SceneImport:
     def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
         """Check the pixel order against this radar's detections, then the lidar if still undecided (``pixel_order.py``)."""
         frames = []
-        for _, record in _decoded(opened, count=False):
+        for _, record in _decoded(opened, probe=True):
             frames.append(rec.sar_frame(opened.stream.kind, record))
             if len(frames) >= 20:
                 break
@@ -436,7 +444,7 @@ class _SceneImport:
         probes: list[tuple[float, np.ndarray]] = []
         i_fastest, evidence = None, "no detections or lidar points to check against"
         for source in ([points] if points else []) + lidars:
-            for offset, buf, start, end in _iter(source, count=False):
+            for offset, buf, start, end in _iter(source, probe=True):
                 try:
                     if source.stream.kind.name == "TrackerState":
                         found = rec.detections(source.stream.kind, buf, start, end)
@@ -526,7 +534,7 @@ class _SceneImport:
             try:
                 found = rec.detections(opened.stream.kind, buf, start, end)
             except WireError as exc:
-                opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
                 continue
             ns = stamps.take(found.timestamp_s)
             if ns is None:
@@ -553,7 +561,7 @@ class _SceneImport:
             try:
                 sweep = rec.lidar_sweep(opened.stream.kind, buf, start, end)
             except WireError as exc:
-                opened.stream._problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
                 continue
             local = sweep.position_local
             if local is None or rec.looks_ecef(local):

@@ -154,7 +154,7 @@ def _first_record_parses(data: memoryview, chain: _Chain, kinds: tuple[Kind, ...
     return True  # only empty records: nothing contradicts this framing
 
 
-def _choose_framing(path: pathlib.Path, data: memoryview, gzipped: bool, kinds: tuple[Kind, ...]) -> tuple[Framing, _Chain]:
+def _choose_framing(data: memoryview, gzipped: bool, kinds: tuple[Kind, ...]) -> tuple[Framing, _Chain]:
     n = len(data)
     plain = _follow(data, 0)
     if n < HEADER_BYTES:
@@ -255,7 +255,7 @@ class ReleaseStream:
             self._gzip_truncated = None
         self.size_bytes = len(data)
         self._data = data
-        self.framing, chain = _choose_framing(self.path, data, gzipped, candidates)
+        self.framing, chain = _choose_framing(data, gzipped, candidates)
         self.kind = self._sniff(chain, candidates)
         self._offsets, self._lengths = self._records(chain)
 
@@ -263,7 +263,8 @@ class ReleaseStream:
         unit = " (decompressed)" if self.framing.gzip else ""
         return f"{self.path}: byte offset {offset}{unit}"
 
-    def _problem(self, offset: int, size: int, reason: str) -> None:
+    def report_problem(self, offset: int, size: int, reason: str) -> None:
+        """A truncated or corrupt stretch at ``offset``: raise, or with ``skip_corrupt`` record it as lost."""
         if not self.skip_corrupt:
             raise ZendarFormatError(f"{self._where(offset)}: {reason} (use --skip-corrupt to skip it)")
         self.losses.append(Loss(offset, size, reason))
@@ -280,7 +281,7 @@ class ReleaseStream:
             lost = (resume if resume is not None else len(self._data)) - chain.end
             if lost == 0:
                 break
-            self._problem(chain.end, lost, f"truncated or corrupt: {reason}")
+            self.report_problem(chain.end, lost, f"truncated or corrupt: {reason}")
             if resume is None:
                 break
             chain = _follow(self._data, resume)
@@ -346,7 +347,7 @@ class ReleaseStream:
             try:
                 yield decode(self.kind.message, data, start, end)
             except WireError as exc:
-                self._problem(offset, end - offset, f"record of {self.kind.label} does not decode: {exc}")
+                self.report_problem(offset, end - offset, f"record of {self.kind.label} does not decode: {exc}")
 
     def close(self) -> None:
         """Drop this stream's hold on the file mapping; it is unmapped once no yielded record still views it."""

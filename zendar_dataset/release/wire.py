@@ -113,7 +113,7 @@ def iter_fields(buf: memoryview, start: int, end: int):
             raise WireError(f"field {number}: unsupported wire type {wire}", tag_at)
 
 
-def _scalar(kind: str, buf: memoryview, wire: int, value: Any) -> Any:
+def _scalar(kind: str, buf: memoryview, value: Any) -> Any:
     if kind == DOUBLE:
         return float(np.frombuffer(buf, "<f8", 1, value[0])[0])
     if kind == FLOAT:
@@ -166,7 +166,7 @@ def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = 
             offset, length = value
             item: Any = decode(kind, buf, offset, offset + length)
         else:
-            item = _scalar(kind, buf, wire, value)
+            item = _scalar(kind, buf, value)
         if spec.repeated:
             out.setdefault(spec.name, []).append(item)
         elif spec.name in out:
@@ -373,26 +373,58 @@ def _fields_with_positions(buf: memoryview, start: int, end: int):
         pos = after
 
 
-def _column_values(rows: np.ndarray, column: Column) -> tuple[np.ndarray, np.ndarray]:
-    """Values of one column from ``rows`` [n, size] uint8, and which rows encode it as laid out."""
-    width = _width(column)
-    raw = rows[:, column.offset : column.offset + width]
-    if not column.dtype.startswith("varint"):
-        return np.ascontiguousarray(raw).view(column.dtype).reshape(-1).astype(np.float64), np.ones(len(rows), bool)
-    # A k-byte varint: continuation bit on every byte but the last.
-    ok = np.all(raw[:, :-1] >= 0x80, axis=1) & (raw[:, -1] < 0x80)
-    value = np.zeros(len(rows), np.uint64)
-    for k in range(width):
-        value |= (raw[:, k].astype(np.uint64) & np.uint64(0x7F)) << np.uint64(7 * k)
-    return value.astype(np.float64), ok
+def _record_dtype(size: int, columns: list[Column], tags: bytes, itemsize: int) -> tuple[np.dtype, list[tuple[str, bytes]]]:
+    """A structured dtype over one element: a field per value (per byte for varints) and per run of tag bytes."""
+    names, formats, offsets = [], [], []
+    for column in columns:
+        if column.dtype.startswith("varint"):
+            for k in range(_width(column)):
+                names.append(f"{column.name}#{k}")
+                formats.append("u1")
+                offsets.append(column.offset + k)
+        else:
+            names.append(column.name)
+            formats.append(column.dtype)
+            offsets.append(column.offset)
+    mask = _skeleton_mask(size, columns)
+    runs: list[tuple[str, bytes]] = []
+    position = 0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.view(np.int8), [0]])))
+    for run, (begin, stop) in enumerate(zip(edges[::2], edges[1::2])):
+        name = f"#tags{run}"
+        names.append(name)
+        formats.append(f"V{stop - begin}")
+        offsets.append(int(begin))
+        runs.append((name, tags[position : position + stop - begin]))
+        position += stop - begin
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize}), runs
 
 
-def _rows(data: np.ndarray, offsets: np.ndarray, size: int) -> np.ndarray:
-    """``[n, size]`` bytes starting at each offset: a strided view when the offsets are evenly spaced."""
+def _records(data: np.ndarray, offsets: np.ndarray, size: int, columns: list[Column], tags: bytes):
+    """The elements at ``offsets`` as a structured array: a strided view when evenly spaced, else a gathered copy."""
     steps = np.diff(offsets)
-    if offsets.size > 1 and np.all(steps == steps[0]) and steps[0] >= size:
-        return np.lib.stride_tricks.as_strided(data[offsets[0] :], (offsets.size, size), (int(steps[0]), 1), writeable=False)
-    return data[offsets[:, None] + np.arange(size)[None, :]]
+    if offsets.size == 1 or (np.all(steps == steps[0]) and steps[0] >= size):
+        step = int(steps[0]) if offsets.size > 1 else size
+        dtype, runs = _record_dtype(size, columns, tags, step)
+        view = np.ndarray((offsets.size,), dtype, buffer=data, offset=int(offsets[0]), strides=(step,))
+        return view, runs
+    dtype, runs = _record_dtype(size, columns, tags, size)
+    gathered = np.ascontiguousarray(data[offsets[:, None] + np.arange(size)[None, :]])
+    return gathered.view(dtype).reshape(-1), runs
+
+
+def _record_values(records: np.ndarray, column: Column) -> tuple[np.ndarray, np.ndarray]:
+    """One column as float64 and which elements encode it as laid out (varint continuation bits)."""
+    if not column.dtype.startswith("varint"):
+        return records[column.name].astype(np.float64), np.ones(records.shape[0], bool)
+    width = _width(column)
+    parts = [records[f"{column.name}#{k}"] for k in range(width)]
+    ok = np.ones(records.shape[0], bool)
+    value = np.zeros(records.shape[0], np.uint64)
+    for k, part in enumerate(parts):
+        ok &= (part >= 0x80) if k < width - 1 else (part < 0x80)
+        value |= (part.astype(np.uint64) & np.uint64(0x7F)) << np.uint64(7 * k)
+    return value.astype(np.float64), ok
 
 
 def decode_repeated_columns(
@@ -430,11 +462,13 @@ def decode_repeated_columns(
         tags, cols = layout
         size = int(lengths[first])
         same_length = remaining[lengths[remaining] == size]
-        rows = _rows(data, offsets[same_length], size)
-        match = np.all(rows[:, _skeleton_mask(size, cols)] == np.frombuffer(tags, np.uint8)[None, :], axis=1)
+        records, runs = _records(data, offsets[same_length], size, cols, tags)
+        match = np.ones(same_length.size, bool)
+        for name, expected in runs:
+            match &= records[name] == np.array(expected, dtype=records.dtype[name])
         values = {}
         for column in cols:
-            values[column.name], ok = _column_values(rows, column)
+            values[column.name], ok = _record_values(records, column)
             match &= ok
         chosen = same_length[match]
         for name, column_values in values.items():
