@@ -90,3 +90,27 @@ def test_bad_tracklogs():
         PoseInterpolator(np.array([0]), p[:1], q[:1])
     with pytest.raises(ZendarError, match="zero or non-finite"):
         PoseInterpolator(np.array([0, 10, 20]), p, np.zeros((3, 4)))
+
+
+def test_rotation_between_samples_one_radian_apart_is_the_closed_form_rotation():
+    # 1 s samples of a constant-rate turn of 1.1 rad/s about a fixed tilted axis: steps of
+    # 1.1 rad, where a normalised lerp of the quaternions is off by up to ~10 mrad (exact only
+    # at the midpoint). Quaternion signs alternate, as a tracklog may store them.
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    rate_rad_per_s = 1.1
+    start = Rotation.from_euler("zyx", [0.4, 0.2, -1.3])
+    step_ns = 1_000_000_000
+    timestamp_ns = T0_NS + step_ns * np.arange(6, dtype=np.int64)
+
+    def closed_form(t_ns):
+        t_s = (np.asarray(t_ns, dtype=np.int64) - T0_NS) / 1e9
+        return Rotation.from_rotvec(np.outer(rate_rad_per_s * t_s, axis)) * start
+
+    quaternions = closed_form(timestamp_ns).as_quat(scalar_first=True)
+    quaternions *= np.where(np.arange(6) % 2 == 0, 1.0, -1.0)[:, None]
+    interp = PoseInterpolator(timestamp_ns, np.zeros((6, 3)), quaternions)
+    fractions = np.array([0.1, 0.25, 0.4, 0.5, 0.6, 0.75, 0.9])
+    query = (timestamp_ns[:-1, None] + (fractions * step_ns).astype(np.int64)[None]).reshape(-1)
+    _, attitude = interp.at(query)
+    error_rad = (Rotation.from_quat(attitude, scalar_first=True) * closed_form(query).inv()).magnitude()
+    assert error_rad.max() < 1e-9
