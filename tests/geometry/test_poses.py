@@ -94,7 +94,7 @@ def test_bad_tracklogs():
 
 def test_rotation_between_samples_one_radian_apart_is_the_closed_form_rotation():
     # 1 s samples of a constant-rate turn of 1.1 rad/s about a fixed tilted axis: steps of
-    # 1.1 rad, where a normalised lerp of the quaternions is off by up to ~10 mrad (exact only
+    # 1.1 rad, where a normalised lerp of the quaternions is off by up to 5 mrad (exact only
     # at the midpoint). Quaternion signs alternate, as a tracklog may store them.
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     rate_rad_per_s = 1.1
