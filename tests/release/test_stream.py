@@ -222,3 +222,20 @@ def test_lidar_columns_match_the_encoded_values_across_layouts(tmp_path):
     np.testing.assert_array_equal(sweep.position_ecef, g)
     np.testing.assert_array_equal(sweep.position_local, local)
     np.testing.assert_array_equal(sweep.intensity, intensity)
+
+
+def test_lidar_columns_of_evenly_spaced_points_ending_the_file(tmp_path):
+    # One layout for every point, the last one ending at the end of the file (the strided view's edge).
+    from zendar_dataset.release.records import lidar_sweep
+
+    rng = np.random.default_rng(4)
+    g, local = np.asarray(POS) + rng.normal(size=(64, 3)), rng.normal(size=(64, 3))
+    points = [enc.lidar_point(1.26e9, g[k], local[k], 5) for k in range(64)]
+    path = enc.write_stream(tmp_path / "lidar.pbs", [enc.lidar_frame(1.26e9, points)], header=False)
+    with ReleaseStream(path) as stream:
+        (_, buf, start, end), = list(stream.records())
+        assert end == len(buf)
+        sweep = lidar_sweep(stream.kind, buf, start, end)
+    np.testing.assert_array_equal(sweep.position_ecef, g)
+    np.testing.assert_array_equal(sweep.position_local, local)
+    assert np.all(sweep.intensity == 5)

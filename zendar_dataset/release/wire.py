@@ -373,7 +373,7 @@ def _fields_with_positions(buf: memoryview, start: int, end: int):
         pos = after
 
 
-def _record_dtype(size: int, columns: list[Column], tags: bytes, itemsize: int) -> tuple[np.dtype, list[tuple[str, bytes]]]:
+def _record_dtype(size: int, columns: list[Column], tags: bytes) -> tuple[np.dtype, list[tuple[str, bytes]]]:
     """A structured dtype over one element: a field per value (per byte for varints) and per run of tag bytes."""
     names, formats, offsets = [], [], []
     for column in columns:
@@ -397,18 +397,16 @@ def _record_dtype(size: int, columns: list[Column], tags: bytes, itemsize: int) 
         offsets.append(int(begin))
         runs.append((name, tags[position : position + stop - begin]))
         position += stop - begin
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize}), runs
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size}), runs
 
 
 def _records(data: np.ndarray, offsets: np.ndarray, size: int, columns: list[Column], tags: bytes):
     """The elements at ``offsets`` as a structured array: a strided view when evenly spaced, else a gathered copy."""
     steps = np.diff(offsets)
+    dtype, runs = _record_dtype(size, columns, tags)
     if offsets.size == 1 or (np.all(steps == steps[0]) and steps[0] >= size):
         step = int(steps[0]) if offsets.size > 1 else size
-        dtype, runs = _record_dtype(size, columns, tags, step)
-        view = np.ndarray((offsets.size,), dtype, buffer=data, offset=int(offsets[0]), strides=(step,))
-        return view, runs
-    dtype, runs = _record_dtype(size, columns, tags, size)
+        return np.ndarray((offsets.size,), dtype, buffer=data, offset=int(offsets[0]), strides=(step,)), runs
     gathered = np.ascontiguousarray(data[offsets[:, None] + np.arange(size)[None, :]])
     return gathered.view(dtype).reshape(-1), runs
 
