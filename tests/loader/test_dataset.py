@@ -18,6 +18,7 @@ from tests.loader.conftest import (
     sar_times,
 )
 from pyproj import Transformer
+from scipy.spatial.transform import Rotation
 
 from zendar_dataset import ZendarDataset, ZendarFormatError
 from zendar_dataset.format.reader import StoredArray
@@ -98,7 +99,11 @@ def test_poses_at_reference_time(dataset_root):
         np.testing.assert_allclose(
             np.abs(item["tracklog"]["attitude_wxyz"]), [np.sqrt(0.5), 0, np.sqrt(0.5), 0], atol=1e-12
         )
-        assert ECEF_R_IMU.shape == (3, 3)
+        # The attitude read back is the IMU -> ECEF rotation written; the ego's rotation adds the
+        # IMU mount (forward, right, down: a half turn about x), so the two differ by that mount.
+        read_rotation = Rotation.from_quat(item["tracklog"]["attitude_wxyz"], scalar_first=True).as_matrix()
+        np.testing.assert_allclose(read_rotation, ECEF_R_IMU, atol=1e-12)
+        np.testing.assert_allclose(item["ecef_T_ego"][:3, :3], ECEF_R_IMU @ np.diag([1.0, -1.0, -1.0]), atol=1e-9)
         poses = ds.ego_poses(item["scene_id"])
         np.testing.assert_allclose(poses.ecef_T_ego(t).as_matrix(), expected_ecef_T_ego, atol=1e-9)
         np.testing.assert_allclose(poses.enu_T_ego(t).as_matrix(), expected_enu_T_ego, atol=1e-6)
