@@ -21,7 +21,7 @@ import tempfile
 import time
 
 import numpy as np
-from harness import interleaved, print_environment, print_load_after
+from harness import Spread, interleaved, print_environment, print_load_after
 
 from zendar_dataset.cli.data_synth import default_jobs
 from zendar_dataset.geometry.poses import PoseInterpolator
@@ -35,13 +35,15 @@ from zendar_dataset.sim.radar_model import synthesize_cube
 from zendar_dataset.sim.scene import build_scene, simulate_sar, stream_rng
 
 
-def _best(fn, repeats):
+def _timed(fn, repeats):
+    """(median seconds, min / median / max, last result) of ``repeats`` calls."""
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
         result = fn()
         times.append(time.perf_counter() - start)
-    return min(times), result
+    spread = Spread.of(times)
+    return spread.median, spread, result
 
 
 def bench_cube() -> None:
@@ -54,13 +56,14 @@ def bench_cube() -> None:
     amp = rng.normal(size=20) + 1j * rng.normal(size=20)
     t = np.arange(params.n_chirps) * params.chirp_interval_s
     per_chirp = pos[:, None] + vel[:, None] * t[None, :, None]
-    exact_s, exact = _best(lambda: range_doppler(beat_signal_exact(params, pos, vel, amp)), 2)
-    print("cube synthesis, 512 x 256 x 4, 20 moving targets")
-    print(f"{'half-width (bins)':>18} {'fast ms':>9} {'exact ms':>9} {'speed-up':>9} {'rel. L2 err':>12}")
+    exact_s, _, exact = _timed(lambda: range_doppler(beat_signal_exact(params, pos, vel, amp)), 2)
+    print("cube synthesis, 512 x 256 x 4, 20 moving targets (medians; fast: min-max of 7)")
+    print(f"{'half-width (bins)':>18} {'fast ms':>22} {'exact ms':>9} {'speed-up':>9} {'rel. L2 err':>12}")
     for half_width in (4, 6, 8):
-        fast_s, fast = _best(lambda: synthesize_cube(params, per_chirp, amp, half_width_bins=half_width), 7)
+        fast_s, spread, fast = _timed(lambda: synthesize_cube(params, per_chirp, amp, half_width_bins=half_width), 7)
         error = np.linalg.norm(fast - exact) / np.linalg.norm(exact)
-        print(f"{half_width:>18} {fast_s * 1e3:9.1f} {exact_s * 1e3:9.1f} {exact_s / fast_s:9.1f} {error:12.2e}")
+        print(f"{half_width:>18} {spread.scaled(1e3).text('.1f'):>22} {exact_s * 1e3:9.1f} {exact_s / fast_s:9.1f} "
+              f"{error:12.2e}")
 
 
 def bench_scene_parts() -> None:
@@ -72,17 +75,17 @@ def bench_scene_parts() -> None:
         written = truth.tracklog_written
         tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
         rng = stream_rng(0, 0, "sar_front_left")
-        sar_s, _ = _best(lambda: simulate_sar(truth, profile, "front_left", 0.55, rng, tracklog), 3)
+        sar_s, _, _ = _timed(lambda: simulate_sar(truth, profile, "front_left", 0.55, rng, tracklog), 3)
         rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(0.55))
         boxes = truth.world.boxes_at(0.55)
-        lidar_s, _ = _best(lambda: lidar_sweep(rng, rotation, position, boxes, profile.lidar_azimuth_step_deg), 3)
+        lidar_s, _, _ = _timed(lambda: lidar_sweep(rng, rotation, position, boxes, profile.lidar_azimuth_step_deg), 3)
         print(f"{name:>8} {sar_s * 1e3:13.1f} {lidar_s * 1e3:15.1f} {truth.world.static_scatterers.rcs_m2.size:11d}")
     paper = get_profile("paper")
     beams = 16 * int(360 / paper.lidar_azimuth_step_deg)
     truth = build_scene(get_profile("demo"), 0, 0)
     rotation, position = ego_model.sensor_poses_enu(truth.ego, ego_model.LIDAR, np.array(0.55))
     rng = np.random.default_rng(0)
-    lidar_s, _ = _best(lambda: lidar_sweep(rng, rotation, position, truth.world.boxes_at(0.55), paper.lidar_azimuth_step_deg), 3)
+    lidar_s, _, _ = _timed(lambda: lidar_sweep(rng, rotation, position, truth.world.boxes_at(0.55), paper.lidar_azimuth_step_deg), 3)
     print(f"paper-resolution VLP-16 sweep ({beams} firings): {lidar_s * 1e3:.1f} ms")
 
 
