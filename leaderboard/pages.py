@@ -58,7 +58,9 @@ form.upload button { grid-column: 2; justify-self: start; font: inherit; font-we
 #status.failed { color: #a61b1b; }
 #status ul { color: #a61b1b; }
 code { font-size: 13px; }
-table.scores { width: auto; min-width: 220px; }
+table.scores { width: auto; min-width: 200px; }
+.part { display: flex; flex-wrap: wrap; gap: 24px; align-items: flex-start; }
+.charts { margin-top: 0; }
 """
 
 # Sorting in the browser: each AP header re-orders the rows by its band (descending, empty last).
@@ -177,7 +179,8 @@ def ranking_page(
     else:
         note = ("Live scores on the <b>public</b> part of the test split. The private part decides the final "
                 "ranking and is shown when the round closes.")
-    note += " AP in percent, rounded to 0.1; 95% bootstrap interval over scenes underneath when available."
+    note += (" AP in percent, rounded to 0.1; 95% bootstrap interval over scenes underneath when available."
+             " Click an AP heading to rank by that band.")
     header = "".join(
         f'<th class="num"><button type="button" data-band="{band}" aria-pressed="{str(band == sorted_by).lower()}">'
         f"AP {band}</button></th>"
@@ -217,7 +220,7 @@ def ranking_page(
 
 
 def _pr_svg(curve: dict[str, list[float]], band: str) -> str:
-    size, pad = 230, 34
+    size, pad = 210, 32
     inner = size - 2 * pad
 
     def xy(recall: float, precision: float) -> str:
@@ -269,8 +272,8 @@ def entry_page(
         )
         sections.append(
             f"<h3>{esc(part.capitalize())} part ({score['n_frames']} frames)</h3>"
-            f'<table class="scores"><thead><tr><th>band</th><th class="num">AP [%]</th></tr></thead>'
-            f'<tbody>{rows}</tbody></table><div class="charts">{charts}</div>'
+            f'<div class="part"><table class="scores"><thead><tr><th>band</th><th class="num">AP [%]</th></tr></thead>'
+            f'<tbody>{rows}</tbody></table><div class="charts">{charts}</div></div>'
         )
     meta = entry["meta"]
     url = meta.get("url")

@@ -228,8 +228,8 @@ class Handler(BaseHTTPRequestHandler):
             text = entries_mod.to_csv(entries_mod.leaderboard(store, band))
             self._send(HTTPStatus.OK, text.encode(), "text/csv; charset=utf-8")
         elif path in ("/", "/index.html"):
-            board = entries_mod.leaderboard(store, band)
-            self._html(lambda nonce: ranking_page(board, entry_href=lambda i: f"/entry/{i}", static=False, nonce=nonce))
+            page = _ranking_html(store, band)
+            self._html(lambda nonce: page.replace(_NONCE_SLOT, nonce))
         elif path == "/submit":
             self._html(lambda nonce: submit_page(quota=self.settings.quota, max_bytes=self.settings.max_bytes, nonce=nonce))
         elif (match := re.fullmatch(r"/entry/(\d{1,18})", path)) is not None:
@@ -274,6 +274,23 @@ class Handler(BaseHTTPRequestHandler):
         answer["submitted_at"] = entries_mod.iso_utc(submission.submitted_at)
         answer["sha256"] = submission.sha256
         self._json(HTTPStatus.OK, answer)
+
+
+# The ranking page is rendered once per database generation with this unguessable stand-in for
+# the per-response nonce, which each response then puts in its place.
+_NONCE_SLOT = secrets.token_hex(16)
+_page_cache: dict[tuple[str, str], tuple[int, str]] = {}
+
+
+def _ranking_html(store: Store, band: str) -> str:
+    key = (str(store.path), band)
+    generation = store.generation()
+    cached = _page_cache.get(key)
+    if cached is None or cached[0] != generation:
+        board = entries_mod.leaderboard(store, band)
+        page = ranking_page(board, entry_href=lambda i: f"/entry/{i}", static=False, nonce=_NONCE_SLOT)
+        cached = _page_cache[key] = (generation, page)
+    return cached[1]
 
 
 def entry_parts(store: Store, submission_id: int) -> tuple[dict, dict[str, dict | None]] | None:

@@ -223,6 +223,8 @@ def test_hidden_deleted_and_closed_round(tmp_path):
         assert main(["delete", str(ids[1]), "--db", str(server.db)]) == 0
         entries = request(f"{server.url}/api/leaderboard")[1]["entries"]
         assert [e["id"] for e in entries] == [ids[2]]
+        page = request(f"{server.url}/")[1]  # the cached page follows the administrator's commands
+        assert 'id="entry-' + str(ids[2]) in page and f'id="entry-{ids[0]}"' not in page and f'id="entry-{ids[1]}"' not in page
         assert request(f"{server.url}/entry/{ids[0]}")[0] == 404
         assert main(["delete", "999", "--db", str(server.db)]) == 2
 
