@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from zendar_dataset.geometry.frames import ecef_to_sar_pixel
-from zendar_dataset.release.records import SarFrame, sar_pixels
+from zendar_dataset.release.records import SarFrame, sar_flat
 
 _MAX_FRAMES = 20
 _MAX_DT_S = 0.05
@@ -20,12 +20,12 @@ _DECISIVE_RATIO = 2.0
 _MIN_POINTS = 5
 
 
-def _brightness(image: np.ndarray, i: np.ndarray, j: np.ndarray) -> float:
-    """Median magnitude at the points over the image's median magnitude."""
-    # The background level from a sparse sample: a full median of a 512×512 image per frame costs more than decoding it.
-    sample = np.abs(image.reshape(-1)[:: max(1, image.size // 4096)])
+def _brightness(flat: np.ndarray, index: np.ndarray) -> float:
+    """Median magnitude at flat ``index`` over the buffer's median magnitude (a sparse sample of it:
+    a full median per 512×512 frame would cost more than decoding it)."""
+    sample = np.abs(flat[:: max(1, flat.size // 4096)])
     background = float(np.median(sample)) or float(np.mean(sample)) or 1.0
-    return float(np.median(np.abs(image[i, j]))) / background
+    return float(np.median(np.abs(flat[index]))) / background
 
 
 def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarray]]) -> tuple[bool | None, str]:
@@ -68,12 +68,12 @@ def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarra
         if not np.any(inside):
             continue
         try:
-            a, _ = sar_pixels(frame, i_fastest=True)
-            b, _ = sar_pixels(frame, i_fastest=False)
+            flat, _ = sar_flat(frame)
         except ValueError:
             continue
-        score_a = _brightness(a, i[inside], j[inside])
-        score_b = _brightness(b, i[inside], j[inside])
+        i, j = i[inside], j[inside]
+        score_a = _brightness(flat, j * frame.rows + i)
+        score_b = _brightness(flat, i * frame.cols + j)
         log_ratio += np.log(max(score_a, 1e-12) / max(score_b, 1e-12))
         used += int(np.count_nonzero(inside))
     if used < _MIN_POINTS:

@@ -99,6 +99,20 @@ def sar_frame(kind: Kind, record: dict) -> SarFrame:
     )
 
 
+def sar_flat(frame: SarFrame) -> tuple[np.ndarray, str]:
+    """The pixel buffer as a flat ``[rows·cols]`` array of its element type, and ``"complex"`` or ``"magnitude"``.
+
+    See :func:`sar_pixels` for how the element type is chosen; ValueError when the size fits neither.
+    """
+    count = frame.rows * frame.cols
+    size = len(frame.data)
+    if count == 0 or size % count or size // count not in (4, 8):
+        raise ValueError(f"{size} bytes of pixel data do not hold rows×cols = {frame.rows}×{frame.cols} pixels of 4 or 8 bytes")
+    if size // count == 8:
+        return np.frombuffer(frame.data, "<c8"), "complex"
+    return np.frombuffer(frame.data, "<f4" if frame.pixel_type == REAL_32F else "<u4"), "magnitude"
+
+
 def sar_pixels(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str]:
     """The image ``[rows, cols]`` complex64 with element [i, j] = pixel (i, j), and what it holds.
 
@@ -124,17 +138,7 @@ def sar_pixels(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str
     ValueError
         When the buffer size is not 4 or 8 bytes per pixel.
     """
-    count = frame.rows * frame.cols
-    size = len(frame.data)
-    if count == 0 or size % count or size // count not in (4, 8):
-        raise ValueError(f"{size} bytes of pixel data do not hold rows×cols = {frame.rows}×{frame.cols} pixels of 4 or 8 bytes")
-    per_pixel = size // count
-    if per_pixel == 8:
-        flat = np.frombuffer(frame.data, "<c8")
-        holds = "complex"
-    else:
-        flat = np.frombuffer(frame.data, "<f4" if frame.pixel_type == REAL_32F else "<u4")
-        holds = "magnitude"
+    flat, holds = sar_flat(frame)
     grid = flat.reshape(frame.cols, frame.rows).T if i_fastest else flat.reshape(frame.rows, frame.cols)
     return grid.astype(np.complex64), holds
 
@@ -267,7 +271,7 @@ def lidar_sweep(kind: Kind, buf: memoryview, start: int, end: int) -> LidarSweep
 
 def looks_ecef(points: np.ndarray) -> bool:
     """Whether finite points sit at least 6300 km from the origin (ECEF rather than a sensor frame)."""
-    finite = points[np.all(np.isfinite(points), axis=1)]
+    finite = points[:1024][np.all(np.isfinite(points[:1024]), axis=1)]  # a sample decides: all points share a frame
     return bool(finite.size) and bool(np.median(np.linalg.norm(finite, axis=1)) > EARTH_RADIUS_MIN_M)
 
 
