@@ -3,12 +3,14 @@
 The same function serves ``zendar-leaderboard check`` (offline) and the server, which runs it before
 anything is queued. Parsing is strict JSON (orjson): ``NaN``/``Infinity`` literals, numbers that
 overflow a double and nesting deeper than 1024 levels are refused by the parser itself, in C,
-before any Python recursion could be exhausted.
+before any Python recursion could be exhausted; integers of 20 digits or more are refused before
+parsing (the parser would round them to a double without a word).
 """
 
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,11 +49,22 @@ class CheckedSubmission:
         return not self.problems
 
 
+# A number token (after ':', ',' or '[') with 20 or more integer digits: beyond any 64-bit integer.
+# The parser would silently round it to a double; it is refused instead, before parsing.
+_HUGE_INTEGER = re.compile(rb"[:,\[]\s*-?\d{20,}")
+
+
 def parse_json(body: bytes) -> tuple[Any, list[str]]:
     """Strictly parse ``body``; (document, []) or (None, [the reason]).
 
     The parser's message is kept to its reason and position: it never quotes the body back.
     """
+    huge = _HUGE_INTEGER.search(body)
+    if huge is not None:
+        return None, [
+            f"submission: the number at character {huge.start() + 1} has more than 19 digits before its "
+            "decimal point (beyond any 64-bit integer); write large values with an exponent"
+        ]
     try:
         return orjson.loads(body), []
     except orjson.JSONDecodeError as exc:

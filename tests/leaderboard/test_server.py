@@ -280,3 +280,42 @@ def test_scoring_over_the_time_limit_fails_with_a_reason_and_counts(tmp_path):
         assert server.store.submissions_in_window(server.store.team_for_token(token).id) == 1
     finally:
         server.stop()
+
+
+@pytest.mark.slow
+def test_a_scorer_that_dies_fails_its_submission_and_a_fresh_one_takes_the_next(tmp_path):
+    import os
+    import signal
+    import time
+
+    def wait_status(submission_id, status):
+        deadline = time.monotonic() + 120
+        while server.store.submission(submission_id).status != status:
+            assert time.monotonic() < deadline, (submission_id, status)
+            time.sleep(0.05)
+
+    gt = ground_truth(n_scenes=8, frames_per_scene=10)
+    server = InProcessServer(tmp_path, gt, bootstrap=100_000, quota=5)
+    try:
+        token = server.store.add_team("crashy")
+        first = post_submission(server.url, token, submission(gt, seed=51))[1]["id"]
+        second = post_submission(server.url, token, submission(gt, seed=52))[1]["id"]
+        wait_status(first, "scoring")
+        # What the kernel's out-of-memory killer does to a scorer.
+        (scorer,) = server.scoring._scorers
+        os.kill(scorer.process.pid, signal.SIGKILL)
+        done = wait_done(server.url, token, first, timeout_s=120)
+        assert done["status"] == "failed"
+        assert done["error"] == "the scorer stopped while scoring this submission (memory limit 4096 MB)"
+        wait_status(second, "scoring")
+        (fresh,) = server.scoring._scorers
+        assert fresh.process.pid != scorer.process.pid
+    finally:
+        server.stop()  # the second goes back to the queue
+    assert server.store.submission(second).status == "queued"
+    server = InProcessServer(tmp_path, gt, bootstrap=0, quota=5)
+    try:
+        assert wait_done(server.url, token, second)["status"] == "scored"
+        assert server.store.submission(first).status == "failed"  # failures are final, never retried
+    finally:
+        server.stop()

@@ -89,15 +89,26 @@ def test_nesting_bombs_are_refused_with_one_clear_problem(raw):
     assert time.process_time() - started < 5  # refused by the parser, not by walking the tree
 
 
-@pytest.mark.parametrize("number", [b"1e400", b"-1e999", b"1" + b"0" * 400, b"9" * 1_000_000])
+@pytest.mark.parametrize(
+    "number", [b"1e400", b"-1e999", b"1" + b"0" * 400, b"9" * 1_000_000, b"-12345678901234567890", b"1" + b"0" * 25]
+)
 def test_numbers_too_large_for_a_double_are_refused(number):
     gt = ground_truth(n_scenes=1, frames_per_scene=1)
     frame_id = next(iter(gt["frames"]))
     raw = b'{"meta": %s, "results": {"%s": [{"x": %s, "y": 1.0, "score": 0.5}]}}' % (
         json.dumps(meta()).encode(), frame_id.encode(), number)
     problems = check_submission(raw, [frame_id]).problems
-    assert len(problems) == 1 and "too large for a double" in problems[0], problems
+    assert len(problems) == 1, problems
+    assert "too large for a double" in problems[0] or "more than 19 digits" in problems[0], problems
     assert len(problems[0]) < 200  # the number is not quoted back
+
+
+def test_integers_up_to_19_digits_and_digits_inside_strings_pass():
+    gt = {"frames": {"scene-1/1600000000000000000000000": [{"x": 1.0, "y": 2.0}]}}
+    frame_id = next(iter(gt["frames"]))
+    raw = b'{"meta": %s, "results": {"%s": [{"x": 1234567890123456789, "y": 1.0, "score": 0.5}]}}' % (
+        json.dumps(meta(description="serial 123456789012345678901234567890")).encode(), frame_id.encode())
+    assert check_submission(raw, [frame_id]).ok
 
 
 def test_nan_literals_and_broken_json_are_refused():
