@@ -124,6 +124,7 @@ def calibration(profile: SimProfile) -> dict:
                 range_window="hann",
                 doppler_window="hann",
                 fov_azimuth_deg=RADAR_FOV_AZIMUTH_DEG,
+                sar_bandwidth_hz=profile.sar_bandwidth_hz,
             )
         elif name == CAMERA:
             k, distortion = camera_intrinsics(profile)

@@ -1,8 +1,9 @@
 """Simulation profiles: the numbers that size a synthetic dataset.
 
-``paper`` follows the paper (512 x 256 x 4 cubes with 18 cm range bins, 2 m
-SAR apertures imaged at 4 cm pixels, a 24 Hz camera, scenes of tens of
-seconds). ``demo`` is what the main command runs on a 2-core laptop and
+``paper`` follows the paper (512 x 256 x 4 cubes with 18 cm range bins; SAR
+from a 3.75 GHz waveform (4 cm range resolution, paper section 1.1.1) over 2 m
+apertures, imaged at 4 cm pixels out to 60 m across each radar's field of view;
+a 24 Hz camera; scenes of tens of seconds). ``demo`` is what the main command runs on a 2-core laptop and
 ``tiny`` is what the tests run; their reductions are listed in
 docs/simulator.md and in each profile's ``reductions``.
 """
@@ -14,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
+from zendar_dataset.sim.imperfections import Imperfections
 
 
 @dataclass(frozen=True)
@@ -36,8 +38,13 @@ class SimProfile:
         Unambiguous radial speed ``lambda / (4 T_c)``; sets the chirp interval.
     radar_rate_hz : float
         Cubes per second per radar.
-    sar_pixel_m, sar_shape, sar_aperture_m, sar_rate_hz
-        SAR pixel size (m), image ``(H, W)``, synthetic aperture length (m), images per second.
+    sar_pixel_m, sar_aperture_m, sar_rate_hz
+        SAR pixel size (m), synthetic aperture length (m), images per second.
+    sar_bandwidth_hz : float
+        Swept bandwidth of the waveform the SAR images are formed from (Hz); its range
+        resolution ``c / (2 B)`` is matched to ``sar_pixel_m``. The cubes keep ``bandwidth_hz``.
+    sar_coverage_m : float
+        Each radar's SAR image covers its azimuth field of view out to this range (m).
     lidar_azimuth_step_deg : float
         Horizontal angle between lidar firings (VLP-16: 0.2 deg at 10 Hz).
     camera_shape : tuple of int
@@ -46,6 +53,10 @@ class SimProfile:
         Inclusive range of the number of moving cars per scene.
     facade_spacing_m : float
         Spacing of the point scatterers along building facades.
+    reductions : tuple of str
+        How the profile departs from the paper.
+    imperfections : Imperfections
+        Clutter, multipath, car aspect, wheel micro-Doppler and antenna errors (all on by default).
     """
 
     name: str
@@ -58,7 +69,8 @@ class SimProfile:
     max_velocity_mps: float
     radar_rate_hz: float
     sar_pixel_m: float
-    sar_shape: tuple[int, int]
+    sar_bandwidth_hz: float
+    sar_coverage_m: float
     sar_aperture_m: float
     sar_rate_hz: float
     lidar_rate_hz: float
@@ -68,12 +80,13 @@ class SimProfile:
     n_moving_cars: tuple[int, int]
     facade_spacing_m: float
     reductions: tuple[str, ...] = field(default=())
+    imperfections: Imperfections = field(default=Imperfections())
 
     def __post_init__(self) -> None:
         problems = []
         for key in ("scene_duration_s", "range_bin_m", "max_velocity_mps", "radar_rate_hz", "sar_pixel_m",
-                    "sar_aperture_m", "sar_rate_hz", "lidar_rate_hz", "lidar_azimuth_step_deg",
-                    "camera_rate_hz", "facade_spacing_m"):
+                    "sar_bandwidth_hz", "sar_coverage_m", "sar_aperture_m", "sar_rate_hz", "lidar_rate_hz",
+                    "lidar_azimuth_step_deg", "camera_rate_hz", "facade_spacing_m"):
             value = getattr(self, key)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 problems.append(f"{key} must be a positive number, got {value!r}")
@@ -109,7 +122,6 @@ class SimProfile:
     def to_json(self) -> dict:
         """Plain-JSON description (recorded in dataset.json for resumable runs)."""
         out = asdict(self)
-        out["sar_shape"] = list(self.sar_shape)
         out["camera_shape"] = list(self.camera_shape)
         out["n_moving_cars"] = list(self.n_moving_cars)
         out["reductions"] = list(self.reductions)
@@ -128,7 +140,8 @@ PROFILES: dict[str, SimProfile] = {
         max_velocity_mps=20.0,
         radar_rate_hz=10.0,
         sar_pixel_m=0.04,
-        sar_shape=(768, 768),
+        sar_bandwidth_hz=3.75e9,
+        sar_coverage_m=60.0,
         sar_aperture_m=2.0,
         sar_rate_hz=10.0,
         lidar_rate_hz=10.0,
@@ -149,7 +162,8 @@ PROFILES: dict[str, SimProfile] = {
         max_velocity_mps=20.0,
         radar_rate_hz=10.0,
         sar_pixel_m=0.16,
-        sar_shape=(192, 192),
+        sar_bandwidth_hz=SPEED_OF_LIGHT_MPS / (2 * 0.16),
+        sar_coverage_m=60.0,
         sar_aperture_m=0.25,
         sar_rate_hz=10.0,
         lidar_rate_hz=10.0,
@@ -161,7 +175,7 @@ PROFILES: dict[str, SimProfile] = {
         reductions=(
             "256 range bins of 0.36 m (same 92 m reach) instead of 512 of 0.18 m",
             "64 Doppler bins instead of 256",
-            "SAR pixels of 16 cm over 31 m, from 0.25 m apertures (resolution matched to the pixel)",
+            "SAR pixels of 16 cm from a 0.94 GHz waveform and 0.25 m apertures (resolution matched to the pixel)",
             "lidar firing every 0.4 deg instead of 0.2 deg",
             "camera 320 x 180 at 12 Hz",
             "6 s scenes, 5 to 10 moving cars",
@@ -178,7 +192,8 @@ PROFILES: dict[str, SimProfile] = {
         max_velocity_mps=20.0,
         radar_rate_hz=10.0,
         sar_pixel_m=0.4,
-        sar_shape=(48, 48),
+        sar_bandwidth_hz=SPEED_OF_LIGHT_MPS / (2 * 0.4),
+        sar_coverage_m=60.0,
         sar_aperture_m=0.1,
         sar_rate_hz=10.0,
         lidar_rate_hz=10.0,
@@ -189,7 +204,7 @@ PROFILES: dict[str, SimProfile] = {
         facade_spacing_m=1.0,
         reductions=(
             "64 x 32 x 4 cubes with 0.6 m range bins",
-            "SAR pixels of 40 cm over 19 m, from 0.1 m apertures",
+            "SAR pixels of 40 cm from a 0.37 GHz waveform and 0.1 m apertures",
             "lidar firing every 2 deg, camera 64 x 48 at 12 Hz",
             "1 s scenes, 3 to 5 moving cars",
         ),

@@ -65,12 +65,42 @@ def aperture_times(
     return snapped
 
 
+def sar_waveform(cube_params: FmcwParams, bandwidth_hz: float, max_range_m: float) -> FmcwParams:
+    """The waveform SAR images are formed from: the cube's carrier, chirp interval and receivers,
+    swept over ``bandwidth_hz``, with enough fast-time samples to reach ``max_range_m``.
+
+    The ADC window fills the same 85 % of the chirp interval as the cube's, so the
+    sample rate (and with it the thermal noise ``k T F f_s`` per sample) grows with
+    the number of samples.
+    """
+    range_bin_m = SPEED_OF_LIGHT_MPS / (2.0 * bandwidth_hz)
+    n_samples = scipy.fft.next_fast_len(int(np.ceil(max_range_m / range_bin_m)) + 2 * MIN_PULSES)
+    return FmcwParams(
+        center_frequency_hz=cube_params.center_frequency_hz,
+        bandwidth_hz=float(bandwidth_hz),
+        sample_rate_hz=n_samples / (0.85 * cube_params.chirp_interval_s),
+        n_samples=int(n_samples),
+        n_chirps=cube_params.n_chirps,
+        chirp_interval_s=cube_params.chirp_interval_s,
+        rx_positions_m=cube_params.rx_positions_m,
+    )
+
+
 @dataclass(frozen=True)
 class SarGeometry:
     """Where a radar's SAR image lies in the ego frame at the image time.
 
     The image plane is horizontal at the radar's mounting height; rows (``i``)
     run along the ego x axis, columns (``j``) along ego y (left).
+
+    Attributes
+    ----------
+    center_ego : numpy.ndarray
+        ``[3]`` centre of the image in the ego frame, metres.
+    pixel_m : float
+        Pixel size along both axes, metres.
+    shape : tuple of int
+        ``(H, W)`` pixels.
     """
 
     center_ego: np.ndarray
@@ -78,11 +108,42 @@ class SarGeometry:
     shape: tuple[int, int]
 
     @classmethod
-    def for_radar(cls, position_ego: np.ndarray, boresight_ego: np.ndarray, pixel_m: float, shape: tuple[int, int]) -> SarGeometry:
-        half_diagonal = 0.5 * pixel_m * np.hypot(*shape)
-        boresight = np.array([boresight_ego[0], boresight_ego[1], 0.0]) / np.hypot(boresight_ego[0], boresight_ego[1])
-        center = np.asarray(position_ego, dtype=np.float64) + boresight * (half_diagonal + 1.0)
-        return cls(center, float(pixel_m), (int(shape[0]), int(shape[1])))
+    def covering(
+        cls,
+        position_ego: np.ndarray,
+        boresight_ego: np.ndarray,
+        half_fov_rad: float,
+        coverage_m: float,
+        pixel_m: float,
+        extra_points_ego: np.ndarray | None = None,
+    ) -> SarGeometry:
+        """The smallest ego-axis-aligned image that holds the radar's field of view out to ``coverage_m``.
+
+        The field of view is the horizontal sector of half-angle ``half_fov_rad``
+        around the boresight, apex at the radar; ``extra_points_ego`` ``[K, 2 or 3]``
+        (e.g. the lane ahead) are covered too.
+        """
+        position = np.asarray(position_ego, dtype=np.float64)
+        heading = float(np.arctan2(boresight_ego[1], boresight_ego[0]))
+        # The sector's bounding box: its apex, its arc's ends and the arc's axis crossings.
+        angles = [heading - half_fov_rad, heading + half_fov_rad]
+        angles += [k * np.pi / 2 for k in range(-4, 5) if abs(np.angle(np.exp(1j * (k * np.pi / 2 - heading)))) < half_fov_rad]
+        arc = position[None, :2] + coverage_m * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        points = [position[None, :2], arc]
+        if extra_points_ego is not None:
+            points.append(np.asarray(extra_points_ego, dtype=np.float64).reshape(-1, np.shape(extra_points_ego)[-1])[:, :2])
+        points = np.concatenate(points)
+        low, high = points.min(axis=0), points.max(axis=0)
+        shape = tuple(int(n) for n in np.ceil((high - low) / pixel_m).astype(np.int64) + 1)
+        center = np.array([*(0.5 * (low + high)), position[2]])
+        return cls(center, float(pixel_m), (shape[0], shape[1]))
+
+    @property
+    def corners_ego(self) -> np.ndarray:
+        """``[4, 3]`` the image's corner pixel centres in the ego frame."""
+        half = 0.5 * (np.array(self.shape) - 1) * self.pixel_m
+        signs = np.array([[-1, -1], [-1, 1], [1, -1], [1, 1]], dtype=np.float64)
+        return self.center_ego[None, :] + np.concatenate([signs * half, np.zeros((4, 1))], axis=1)
 
     def grid_enu(self, enu_r_ego: np.ndarray, enu_t_ego: np.ndarray) -> ImageGrid:
         """The image grid in ENU for the ego pose ``(enu_r_ego [3, 3], enu_t_ego [3])``."""

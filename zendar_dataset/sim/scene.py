@@ -18,15 +18,20 @@ from zendar_dataset.geometry.quaternion import quat_wxyz_to_matrix
 from zendar_dataset.radar.range_doppler import range_doppler, range_profiles
 from zendar_dataset.sim import camera as camera_model
 from zendar_dataset.sim import ego as ego_model
+from zendar_dataset.sim.clutter import road_clutter
+from zendar_dataset.sim.echoes import car_echoes
+from zendar_dataset.sim.imperfections import Imperfections
+from zendar_dataset.sim.imperfections import antenna_errors as channel_errors
 from zendar_dataset.sim.labels import label_rows, radar_views
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
 from zendar_dataset.sim.raycast import line_of_sight
 from zendar_dataset.sim.rotate import compose, rotate, unrotate
-from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m
+from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m, sar_waveform
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
+from zendar_dataset.sim.world import LANE_WIDTH_M, ScattererSet, street_edge_m
 from zendar_dataset.sim.world import INTERSECTION_HALF_WIDTH_M, Road, World, build_static_world
 
 GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
@@ -35,7 +40,7 @@ CUBE_HALF_WIDTH_BINS = 4
 SAR_HALF_WIDTH_BINS = 4
 SAR_MARGIN_M = 5.0
 STREAMS = ("road", "ego", "world", "traffic", "tracklog", "front_left", "front_right", "sar_front_left",
-           "sar_front_right", "lidar", "enu", "clocks")
+           "sar_front_right", "lidar", "enu", "clocks", "clutter")
 
 # Free-running sensors are not triggered together: each starts at its own phase within its frame
 # period and its frame times jitter (camera trigger latency, lidar rotation, radar frame scheduling),
@@ -89,6 +94,10 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
     gaps = [(s - INTERSECTION_HALF_WIDTH_M, s + INTERSECTION_HALF_WIDTH_M) for s in intersections]
     rng = stream_rng(seed, scene_index, "world")
     boxes, scatterers = build_static_world(rng, road, ego_start_s - 40.0, road_end - 40.0, profile.facade_spacing_m, gaps)
+    # The road's surface between the curbs, as clutter (its own stream: the world's draws stay as they were).
+    clutter = road_clutter(stream_rng(seed, scene_index, "clutter"), road, -cruise * PAD_S - 40.0, road_end - 40.0,
+                           (street_edge_m(-1.0), street_edge_m(1.0)), profile.imperfections)
+    scatterers = ScattererSet.concatenate([scatterers, clutter])
     rng = stream_rng(seed, scene_index, "traffic")
     n_cars = int(rng.integers(profile.n_moving_cars[0], profile.n_moving_cars[1] + 1))
     cars = make_traffic(
@@ -106,7 +115,8 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
     return SceneTruth(world, ego, truth, written, enu, start_ns)
 
 
-def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_range_m: float, *, with_velocity: bool = False):
+def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_range_m: float, *,
+                          effects: Imperfections, with_velocity: bool = False):
     """Scatterers within ``max_range_m`` in front of the sensor at the middle of ``t_s`` ``[M]``.
 
     Returns positions ``[S, M, 3]`` in the sensor frame at every time, their
@@ -120,8 +130,8 @@ def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_r
     rotation, position = ego_model.sensor_poses_enu(truth.ego, sensor, t_s)  # [M, 3, 3], [M, 3]
     world = truth.world
     static = world.static_scatterers
-    moving_pos, _vel, moving, _ids = world.moving_scatterers(t_s)
     mid = m // 2
+    moving_pos, _vel, moving, _ids = car_echoes(world, t_s, position[mid], effects, mid_index=mid)
     # Cull at the middle time first: transforming every scatterer at every time is the cost.
     static_mid = unrotate(rotation[mid], static.position_m - position[mid])
     reach = max_range_m + 1.0
@@ -160,7 +170,7 @@ def simulate_cube(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_
     params = ego_model.radar_params(profile)
     front_end = RadarFrontEnd()
     t = t_center_s - params.frame_duration_s / 2 + np.arange(params.n_chirps) * params.chirp_interval_s
-    local, rcs, swerling1, phase = _scatterers_in_sensor(truth, sensor, t, params.max_range_m)
+    local, rcs, swerling1, phase = _scatterers_in_sensor(truth, sensor, t, params.max_range_m, effects=profile.imperfections)
     mid = local[:, params.n_chirps // 2]
     keep = _visible(mid, params.max_range_m - CUBE_HALF_WIDTH_BINS * params.range_bin_m)
     fluctuation = _fluctuation(rng, swerling1, phase)
@@ -170,34 +180,33 @@ def simulate_cube(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_
     gain = params.n_samples * params.n_chirps / 4.0
     keep &= np.abs(amplitude) * gain > 0.01 * np.sqrt(noise_w * gain)
     cube = synthesize_cube(params, local[keep], amplitude[keep], half_width_bins=CUBE_HALF_WIDTH_BINS)
+    cube *= channel_errors(ego_model.RADARS.index(sensor), params.n_antennas, profile.imperfections).astype(np.complex64)
     noise = thermal_noise(rng, (params.n_chirps, params.n_samples, params.n_antennas), noise_w)
     return cube + range_doppler(noise, workers=1)
 
 
 def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s: float, rng: np.random.Generator, tracklog: PoseInterpolator):
     """One SAR image and its ECEF image model: ``(image [H, W], grid_ecef, aperture (t0, t1) s)``."""
-    params = ego_model.radar_params(profile)
     front_end = RadarFrontEnd()
     mount = ego_model.EGO_T_SENSOR[sensor]
+    geometry = sar_footprint(profile, sensor)
+    corner_sensor = unrotate(mount.rotation, geometry.corners_ego - mount.translation)
+    r_lo, r_hi = 0.0, float(np.linalg.norm(corner_sensor, axis=1).max()) + 3.0
+    params = sar_waveform(ego_model.radar_params(profile), profile.sar_bandwidth_hz, r_hi)
     boresight_from_track = float(np.arctan2(mount.rotation[1, 0], mount.rotation[0, 0]))
     spacing = nyquist_spacing_m(params.wavelength_m, boresight_from_track)
     ego = truth.ego
     distance = np.concatenate([[0.0], np.cumsum(0.5 * (ego.speed_mps[1:] + ego.speed_mps[:-1]) * np.diff(ego.time_s))])
     t = aperture_times(ego.time_s, distance, t_center_s, profile.sar_aperture_m, spacing, params.chirp_interval_s)
-    geometry = SarGeometry.for_radar(mount.translation, mount.rotation[:, 0], profile.sar_pixel_m, profile.sar_shape)
-    # Keep scatterers that can land in the image (plus the range sidelobes' reach).
-    corners = np.array([[i, j] for i in (-0.5, 0.5) for j in (-0.5, 0.5)]) * np.array(profile.sar_shape) * profile.sar_pixel_m
-    corner_ego = geometry.center_ego[None, :] + np.concatenate([corners, np.zeros((4, 1))], axis=1)
-    corner_sensor = unrotate(mount.rotation, corner_ego - mount.translation)
-    ranges = np.linalg.norm(corner_sensor, axis=1)
-    r_lo, r_hi = 0.0, float(ranges.max()) + 3.0
-    local, rcs, swerling1, phase, velocity = _scatterers_in_sensor(truth, sensor, t, r_hi, with_velocity=True)
+    local, rcs, swerling1, phase, velocity = _scatterers_in_sensor(
+        truth, sensor, t, r_hi, effects=profile.imperfections, with_velocity=True
+    )
     mid = local[:, local.shape[1] // 2]
     r_mid = np.linalg.norm(mid, axis=-1)
     keep = _visible(mid, params.max_range_m - SAR_HALF_WIDTH_BINS * params.range_bin_m) & (r_mid > r_lo) & (r_mid < r_hi)
     # Scatterers far outside the imaged square add only cross-range sidelobes to it.
     mid_ego = rotate(mount.rotation, mid) + mount.translation
-    half_extent = 0.5 * np.array(profile.sar_shape) * profile.sar_pixel_m + SAR_MARGIN_M
+    half_extent = 0.5 * np.array(geometry.shape) * profile.sar_pixel_m + SAR_MARGIN_M
     keep &= np.all(np.abs(mid_ego[:, :2] - geometry.center_ego[:2]) < half_extent, axis=1)
     fluctuation = _fluctuation(rng, swerling1, phase)[keep]
     local, velocity = local[keep], velocity[keep]
@@ -229,6 +238,18 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     grid = geometry.grid_enu(level, c_t)
     image = form_image(params, profiles, phase_centers, grid)
     return image, grid.transformed(truth.enu.ecef_T_enu), (float(t[0]), float(t[-1]))
+
+
+def sar_footprint(profile: SimProfile, sensor: str) -> SarGeometry:
+    """Where ``sensor``'s SAR image lies in the ego frame: its azimuth field of view out to
+    ``profile.sar_coverage_m`` and the ego lane ahead to the same distance."""
+    mount = ego_model.EGO_T_SENSOR[sensor]
+    reach = profile.sar_coverage_m
+    lane_ahead = np.array([[0.0, -LANE_WIDTH_M / 2], [0.0, LANE_WIDTH_M / 2], [reach, -LANE_WIDTH_M / 2], [reach, LANE_WIDTH_M / 2]])
+    return SarGeometry.covering(
+        mount.translation, mount.rotation[:, 0], np.radians(RadarFrontEnd().half_beam_azimuth_deg), reach,
+        profile.sar_pixel_m, lane_ahead,
+    )
 
 
 def frame_times(duration_s: float, rate_hz: float) -> np.ndarray:
