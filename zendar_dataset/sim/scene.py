@@ -31,8 +31,15 @@ from zendar_dataset.sim.rotate import compose, rotate, unrotate
 from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m, sar_waveform
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
-from zendar_dataset.sim.world import LANE_WIDTH_M, ScattererSet, street_edge_m
-from zendar_dataset.sim.world import INTERSECTION_HALF_WIDTH_M, Road, World, build_static_world
+from zendar_dataset.sim.world import (
+    INTERSECTION_HALF_WIDTH_M,
+    LANE_WIDTH_M,
+    Road,
+    ScattererSet,
+    World,
+    build_static_world,
+    street_edge_m,
+)
 
 GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
 PAD_S = 1.5
