@@ -175,3 +175,9 @@ def write_stream(path: pathlib.Path, records: list[bytes], header: bool = True, 
     data = stream_bytes(records, header)
     path.write_bytes(gzip_module.compress(data) if gzip else data)
     return path
+
+
+def chirp_response(timestamp: float, iq_words: np.ndarray, frame: int, chirp_index: int) -> bytes:
+    """ChirpResponse (raw ADC): 1 timestamp, 2-5 rx0-rx3 IQ {3: packed fixed32 IQ}, 6 idx_frame, 8 chirp_index (int32)."""
+    iq = ld(3, np.ascontiguousarray(iq_words, "<u4").tobytes())
+    return ld(1, time_record(timestamp)) + b"".join(ld(n, iq) for n in (2, 3, 4, 5)) + uvar(6, frame) + uvar(7, 0) + uvar(8, chirp_index)

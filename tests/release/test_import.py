@@ -272,3 +272,24 @@ def test_disk_full_exits_1_with_the_path(tmp_path, capsys, monkeypatch):
     assert status == 1
     assert err.strip().splitlines()[-1] == f"error: {tmp_path / 'out' / 'scenes' / '2020-02-03_2252_001.zarr'}: No space left on device"
     assert list((tmp_path / "out" / "scenes").iterdir()) == []
+
+
+def test_single_message_model_raw_packets_and_unknown_streams(tmp_path, capsys):
+    src = tmp_path / "release"
+    build_release(src)
+    scene = src / "2020-02-03_2252" / "001"
+    # The range-Doppler model as a bare *.pb message (no length prefix, no header).
+    model = enc.rd_model(4, (0.0, 0.176, 16), (-0.4, 0.1, 8), [(0.0019 * a, 0.0, 0.0) for a in range(4)], 0.0039)
+    (scene / "range_Doppler" / "left_model.pbs").unlink()
+    (scene / "range_Doppler" / "left_model.pb").write_bytes(model)
+    words = np.arange(8, dtype=np.uint32)
+    enc.write_stream(scene / "radar" / "front" / "stream.pbs", [enc.chirp_response(T0_S + k * 1e-4, words, 0, -1) for k in range(3)], header=False)
+    enc.write_stream(scene / "misc.pbs", [enc.f64(7, 1.0) + enc.uvar(9, 3)] * 2)  # a message no schema defines
+    status, stdout, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0
+    assert "range_Doppler/left_model.pb: RangeDopplerImageModel (2020), 1 records -> calibration/left" in stdout
+    assert "radar/front/stream.pbs: ChirpResponse (raw)" in stdout and "raw acquisition packets are not converted" in stdout
+    assert "misc.pbs: ?" in stdout and "no known message decodes it" in stdout
+    reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
+    assert reader.array("radar/left/cube").shape == (5, 16, 8, 4)
+    assert reader.sensors("radar") == ["left"]

@@ -28,7 +28,7 @@ from zendar_dataset.release import records as rec
 from zendar_dataset.release.discover import SceneSource, find_scenes
 from zendar_dataset.release.messages import RD_MODEL
 from zendar_dataset.release.pixel_order import vote_pixel_order
-from zendar_dataset.release.stream import ReleaseStream
+from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
 from zendar_dataset.release.wire import WireError, decode
 
 SPEED_OF_LIGHT_MPS = 299_792_458.0
@@ -130,6 +130,10 @@ def _open(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, problems: l
         return _Opened(path, None, summary, model)
     try:
         stream = ReleaseStream(path, skip_corrupt=skip_corrupt)
+    except UnknownMessageError as exc:
+        # Sound framing, unknown content (a message the release's schemas do not define): not the user's error.
+        summary.skipped.append(f"no known message decodes it: {exc}")
+        return _Opened(path, None, summary)
     except ZendarFormatError as exc:
         problems.extend(exc.problems)
         return _Opened(path, None, summary)

@@ -36,6 +36,10 @@ _GZIP_MAGIC = b"\x1f\x8b"
 _SNIFF_RECORDS = 16
 
 
+class UnknownMessageError(ZendarFormatError):
+    """A stream whose framing is sound but whose records decode as no known message."""
+
+
 @dataclass(frozen=True)
 class Framing:
     """How a stream's bytes are laid out.
@@ -236,7 +240,7 @@ class ReleaseStream:
     ------
     ZendarFormatError
         At the byte offset where the file is truncated or corrupt (expected and
-        available bytes), or when no known message decodes its records.
+        available bytes); :class:`UnknownMessageError` when no known message decodes its records.
     """
 
     def __init__(self, path: str | os.PathLike, kind: str | None = None, *, skip_corrupt: bool = False) -> None:
@@ -307,7 +311,7 @@ class ReleaseStream:
             if not survivors:
                 tried = ", ".join(k.label for k in alive)
                 detail = f" (first mismatch: {first_error[1]})" if first_error else ""
-                raise ZendarFormatError(f"{self._where(offset - 4)}: expected a record of {tried}, found none decodes{detail}")
+                raise UnknownMessageError(f"{self._where(offset - 4)}: expected a record of {tried}, found none decodes{detail}")
             alive = survivors
             seen += 1
             if len(alive) == 1 or seen >= _SNIFF_RECORDS:
