@@ -177,6 +177,36 @@ def decode_only(root: pathlib.Path) -> None:
                         np.frombuffer(decoded["data"], "<c8")
 
 
+class WriterClock:
+    """Seconds spent inside ``SceneWriter`` (appends, whole-array writes, close): the format's share of an import."""
+
+    METHODS = ("append_sar", "append_radar", "append_lidar", "write_tracklog", "write_detections",
+               "write_camera_index", "write_extra_array", "write_attrs", "close", "__init__")
+
+    def __init__(self) -> None:
+        from zendar_dataset.format.writer import SceneWriter
+
+        self.seconds = 0.0
+        self.cls = SceneWriter
+        self.saved = {name: getattr(SceneWriter, name) for name in self.METHODS}
+        for name, method in self.saved.items():
+            setattr(SceneWriter, name, self._timed(method))
+
+    def _timed(self, method):
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - start
+
+        return timed
+
+    def restore(self) -> None:
+        for name, method in self.saved.items():
+            setattr(self.cls, name, method)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sar-frames", type=int, default=40, help="SAR frames per radar (default 40)")
@@ -191,7 +221,7 @@ def main() -> None:
         print(f"release: {size / 1e6:.1f} MB in {len(list(src.rglob('*.pbs')))} streams")
         import_release(src, work / "warm", log=None)  # compile the numba scanner, warm the page cache
         shutil.rmtree(work / "warm")
-        plain, full, decode = [], [], []
+        plain, full, decode, in_writer = [], [], [], []
         for r in range(args.repeats):
             start = time.perf_counter()
             plain_read(src)
@@ -200,15 +230,23 @@ def main() -> None:
             decode_only(src)
             decode.append(time.perf_counter() - start)
             out = work / f"out{r}"
+            clock = WriterClock()
             start = time.perf_counter()
-            import_release(src, out)
+            try:
+                import_release(src, out)
+            finally:
+                clock.restore()
             full.append(time.perf_counter() - start)
+            in_writer.append(clock.seconds)
             shutil.rmtree(out)
         mb = size / 1e6
         for label, times in (("plain read", plain), ("decode only", decode), ("import-release", full)):
             print(f"{label:<16} {mb / statistics.median(times):8.1f} MB/s  (median of {len(times)}; min {min(times):.2f} s, max {max(times):.2f} s)")
         print(f"import / plain read: {statistics.median(plain) / statistics.median(full):.3f}  (decode only / plain: "
               f"{statistics.median(plain) / statistics.median(decode):.3f})")
+        share = statistics.median(w / f for w, f in zip(in_writer, full))
+        print(f"share of the import spent in the format writer (SceneWriter: checks, checksums, "
+              f"zarr writes): {share:.0%}")
     finally:
         shutil.rmtree(work, ignore_errors=True)
         print(f"load average after: {os.getloadavg()}")
