@@ -87,9 +87,9 @@ def _serve(args: argparse.Namespace) -> int:
     scoring.start()
     host, port = server.server_address[:2]
     print(
-        f"serving http://{host}:{port}/ — split {test_split.split or '(file)'}: {len(test_split.frames)} frames, "
+        f"serving http://{host}:{port}/ - split {test_split.split or '(file)'}: {len(test_split.frames)} frames, "
         f"public {len(test_split.public_frame_ids)}, private {len(test_split.private_frame_ids)}; "
-        f"labels sha256 {test_split.sha256[:12]}…; requeued {recovered['requeued']}, "
+        f"labels sha256 {test_split.sha256[:12]}...; requeued {recovered['requeued']}, "
         f"re-scoring {recovered['rescore']}",
         flush=True,
     )

@@ -277,7 +277,9 @@ def entry_page(
         )
     meta = entry["meta"]
     url = meta.get("url")
-    url_html = f'<a href="{esc(url)}" rel="nofollow noopener">{esc(url)}</a>' if url and url.startswith(("http://", "https://")) else "–"
+    url_html = "–"
+    if url and url.startswith(("http://", "https://")):
+        url_html = f'<a href="{esc(url)}" rel="nofollow noopener">{esc(url)}</a>'
     items = [
         ("Team", esc(entry["team"])), ("Description", esc(meta.get("description"))), ("Link", url_html),
         ("Hardware", esc(meta.get("hardware"))),
@@ -306,7 +308,8 @@ def submit_page(*, quota: int, max_bytes: int, nonce: str | None = None) -> str:
         "organisers.</p>"
         '<form class="upload" id="upload">'
         '<label for="token">Team token</label><input type="password" id="token" name="token" autocomplete="off" required>'
-        '<label for="file">Predictions (.json)</label><input type="file" id="file" name="file" accept=".json,application/json" required>'
+        '<label for="file">Predictions (.json)</label>'
+        '<input type="file" id="file" name="file" accept=".json,application/json" required>'
         '<button type="submit" id="send">Submit</button></form>'
         '<div id="status" role="status" aria-live="polite"></div>'
     )
