@@ -57,30 +57,39 @@ IMAGE_2020 = _msg(
 )
 IMAGE_2021 = _msg("Image", (1, 10), f1=("meta", METADATA), f2=("performance", IMAGE_PERFORMANCE), f10=("cartesian", IMAGE_CARTESIAN))
 
-POINT = _msg(
-    "Point",
-    (1, 2),
-    f1=("timestamp", TIME_RECORD),
-    f2=("position", VEC3D),
-    f3=("magnitude", FLOAT),  # 2020: amplitude
-    f4=("azimuth_variance", FLOAT),
-    f5=("elevation_variance", FLOAT),
-    f6=("range", FLOAT),
-    f7=("range_velocity", FLOAT),
-    f8=("azimuth", FLOAT),
-    f9=("elevation", FLOAT),
-    f10=("snr", FLOAT),  # 2020: confidence; 2021: doa_snr
-    f11=("rd_mean_snr", FLOAT),
-)
+def _point(generation: str) -> Message:
+    """``Point``: fields 3 and 10 keep their numbers and types but were renamed in 2021 (amplitude ->
+    magnitude, confidence -> doa_snr); field 11 exists from the 2021 packages (also in P21D's 2020-layout
+    TrackerState), so both definitions accept it."""
+    first, tenth = ("amplitude", "confidence") if generation == "2020" else ("magnitude", "doa_snr")
+    return _msg(
+        "Point",
+        (1, 2),
+        f1=("timestamp", TIME_RECORD),
+        f2=("position", VEC3D),
+        f3=(first, FLOAT),
+        f4=("azimuth_variance", FLOAT),
+        f5=("elevation_variance", FLOAT),
+        f6=("range", FLOAT),
+        f7=("range_velocity", FLOAT),
+        f8=("azimuth", FLOAT),
+        f9=("elevation", FLOAT),
+        f10=(tenth, FLOAT),
+        f11=("rd_mean_snr", FLOAT),
+    )
+
+
+POINT_2020 = _point("2020")
+POINT_2021 = _point("2021")
 TRACKER_STATE_2020 = _msg(
     "TrackerState",
     (1,),
     f1=("timestamp", TIME_RECORD),
-    f2=("detection", POINT, True),
+    f2=("detection", POINT_2020, True),
     f3=("frame_id", UINT),
     f4=("serial", STRING),
 )
-TRACKER_STATE_2021 = _msg("TrackerState", (1,), f1=("meta", METADATA), f2=("detection", POINT, True))
+TRACKER_STATE_2021 = _msg("TrackerState", (1,), f1=("meta", METADATA), f2=("detection", POINT_2021, True))
 
 POSITION_QUALITY = _msg("PositionQuality", (), f1=("satellite_count", INT32), f2=("gps_status", UINT), f3=("ins_status", UINT))
 POSITION = _msg(
@@ -110,8 +119,8 @@ RD_MODEL = _msg(
     "RangeDopplerImageModel",
     (1, 2, 3, 5),
     f1=("num_rx", UINT),
-    f2=("range_axis", SAMPLING),
-    f3=("doppler_axis", SAMPLING),
+    f2=("range_axis_params", SAMPLING),
+    f3=("doppler_axis_params", SAMPLING),
     f4=("rx_positions", VEC3D, True),
     f5=("wavelength", DOUBLE),
 )

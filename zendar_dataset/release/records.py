@@ -22,13 +22,17 @@ EARTH_RADIUS_MIN_M = 6.3e6  # a position this far from the Earth's centre is ECE
 
 
 def gps_seconds_to_ns(seconds: float) -> int:
-    """GPS seconds (float64) to int64 nanoseconds, rounded to the nearest ns exactly (ties up).
+    """GPS seconds (float64) to int64 nanoseconds: the double's exact value rounded to the nearest ns.
 
-    Computed on the double's exact rational value, so no rounding happens before the last step
-    (``seconds * 1e9`` in float64 would already be off by up to 128 ns near 1.3e9 s).
+    Exact rational arithmetic, so nothing is rounded before the last step (``seconds * 1e9`` in
+    float64 would already be off by up to 128 ns near 1.3e9 s); an exact tie rounds to even, as
+    ``round(fractions.Fraction(seconds) * 10**9)``.
     """
     numerator, denominator = float(seconds).as_integer_ratio()
-    return (2 * numerator * 10**9 + denominator) // (2 * denominator)
+    quotient, remainder = divmod(numerator * 10**9, denominator)
+    if 2 * remainder > denominator or (2 * remainder == denominator and quotient % 2):
+        quotient += 1
+    return quotient
 
 
 def _vec(value: dict | None) -> np.ndarray:
@@ -171,14 +175,18 @@ class Detections:
     columns: dict[str, np.ndarray]
 
 
+# Our column -> the release's field name, per generation (fields 3 and 10 were renamed in 2021).
 _POINT_COLUMNS = {
-    "range_m": "range",
-    "azimuth_rad": "azimuth",
-    "elevation_rad": "elevation",
-    "range_velocity_mps": "range_velocity",
-    "magnitude": "magnitude",
-    "snr": "snr",
-    "rd_mean_snr": "rd_mean_snr",
+    generation: {
+        "range_m": "range",
+        "azimuth_rad": "azimuth",
+        "elevation_rad": "elevation",
+        "range_velocity_mps": "range_velocity",
+        "magnitude": magnitude,
+        "snr": snr,
+        "rd_mean_snr": "rd_mean_snr",
+    }
+    for generation, magnitude, snr in (("2020", "amplitude", "confidence"), ("2021", "magnitude", "doa_snr"))
 }
 
 
@@ -235,8 +243,9 @@ def detections(kind: Kind, buf: memoryview, start: int, end: int) -> Detections:
             offset, length = others[4][-1][1]
             serial = bytes(buf[offset : offset + length]).decode("utf-8", errors="replace")
     n = offsets.shape[0]
-    raw = _columns(m.POINT, buf, offsets, lengths)
-    columns = {ours: raw.get(theirs, np.full(n, np.nan)) for ours, theirs in _POINT_COLUMNS.items()}
+    raw = _columns(kind.message.fields[2].type, buf, offsets, lengths)
+    names = _POINT_COLUMNS["2021" if kind.generation == "2021" else "2020"]
+    columns = {ours: raw.get(theirs, np.full(n, np.nan)) for ours, theirs in names.items()}
     columns["position_ecef"] = _xyz(raw, "position", n)
     return Detections(float(timestamp), frame_id, serial, columns)
 
@@ -292,5 +301,5 @@ def rd_model(record: dict) -> RangeDopplerModel:
 
     rx = np.array([_vec(v) for v in record.get("rx_positions", [])], np.float64).reshape(-1, 3)
     return RangeDopplerModel(
-        int(record["num_rx"]), axis(record["range_axis"]), axis(record["doppler_axis"]), rx, float(record["wavelength"])
+        int(record["num_rx"]), axis(record["range_axis_params"]), axis(record["doppler_axis_params"]), rx, float(record["wavelength"])
     )

@@ -323,7 +323,7 @@ class ReleaseStream:
         if len(alive) > 1:
             hinted = [k for k in alive if any(h in self.path.name.lower() for h in k.name_hints)]
             chosen = (hinted or alive)[0]
-            how = "the file name" if hinted else "the release's preference order"
+            how = "the file name" if len(hinted) == 1 else "the release's preference order (2020 first)"
             self.notes.append(
                 f"records decode as {', '.join(k.label for k in alive)}; {how} chose {chosen.label}"
             )
