@@ -1,6 +1,7 @@
 """Whole synthetic datasets: validity, determinism, resume and refusal, the CLI."""
 
 import json
+import pathlib
 import shutil
 import signal
 import subprocess
@@ -107,14 +108,25 @@ def test_cli_writes_a_valid_dataset_resumes_and_refuses_foreign_directories(tmp_
     assert document["splits"] == {"train": ["scene-0000"], "val": ["scene-0001"], "test": ["scene-0002"]}
     ground_truth = json.loads((out / "test_ground_truth.json").read_text())
     assert all(key.startswith("scene-0002/") for key in ground_truth["frames"]) and ground_truth["frames"]
-    # Interrupted run: one scene missing, a temporary store left behind; re-running finishes it.
+    # Interrupted run: one scene missing, the temporary store of a process that is gone left behind
+    # (named by the package in a child process that then exited); re-running finishes the scene and
+    # removes that temporary, but not a user's entry that merely looks like one.
     mtime = (out / "scenes" / "scene-0000.h5").stat().st_mtime_ns
     (out / "scenes" / "scene-0001.h5").unlink()
-    (out / "scenes" / ".scene-0001.h5.tmp-1-dead").write_bytes(b"partial")
+    named = subprocess.run(
+        [sys.executable, "-c", "import sys; from zendar_dataset.temporary_files import temporary_sibling; "
+         "print(temporary_sibling(sys.argv[1]))", str(out / "scenes" / "scene-0001.h5")],
+        capture_output=True, text=True, check=True,
+    )
+    stale = pathlib.Path(named.stdout.strip())
+    stale.write_bytes(b"partial")
+    lookalike = out / "scenes" / ".scene-0001.h5.tmp-mine"
+    lookalike.write_bytes(b"the user's")
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
     assert (out / "scenes" / "scene-0001.h5").exists()
-    assert not (out / "scenes" / ".scene-0001.h5.tmp-1-dead").exists()
+    assert not stale.exists() and lookalike.read_bytes() == b"the user's"
+    lookalike.unlink()
     assert (out / "scenes" / "scene-0000.h5").stat().st_mtime_ns == mtime
     # Other settings, or a user's directory: refused with exit 2 and nothing touched.
     other = subprocess.run(cmd[:-6] + ["--seed", "2", "--quiet"], capture_output=True, text=True)
