@@ -14,6 +14,7 @@ Run: python benchmarks/bench_sim.py [--skip-demo] [--skip-serial-demo] [--crosso
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import pathlib
 import shutil
@@ -29,10 +30,12 @@ from zendar_dataset.radar.fmcw import beat_signal_exact
 from zendar_dataset.radar.range_doppler import range_doppler
 from zendar_dataset.sim import ego as ego_model
 from zendar_dataset.sim.generate import synthesize_dataset, usable_cpus
+from zendar_dataset.sim.imperfections import Imperfections
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import get_profile
 from zendar_dataset.sim.radar_model import synthesize_cube
-from zendar_dataset.sim.scene import build_scene, simulate_sar, stream_rng
+from zendar_dataset.sim.sar_formation import nyquist_spacing_m
+from zendar_dataset.sim.scene import build_scene, simulate_cube, simulate_sar, stream_rng
 
 
 def _timed(fn, repeats):
@@ -89,6 +92,32 @@ def bench_scene_parts() -> None:
     print(f"paper-resolution VLP-16 sweep ({beams} firings): {lidar_s * 1e3:.1f} ms")
 
 
+def bench_frames(names: tuple[str, ...]) -> None:
+    """Per-frame cube and SAR costs with every imperfection on (the profiles) and off, in the same run,
+    and the time a full scene of each profile would take at those costs (both radars, cubes and SAR)."""
+    print("\nper-frame costs, imperfections on / off (same run), and the projected scene (2 radars, cubes + SAR)")
+    print(f"{'profile':>8} {'SAR pixels':>11} {'pulses':>7} {'cube s on':>10} {'cube s off':>11} {'SAR s on':>9} "
+          f"{'SAR s off':>10} {'scene min':>10}")
+    for name in names:
+        profile = get_profile(name)
+        off = dataclasses.replace(profile, imperfections=Imperfections.none())
+        truth_on, truth_off = build_scene(profile, 0, 0), build_scene(off, 0, 0)
+        written = truth_on.tracklog_written
+        tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
+        repeats = 1 if name == "paper" else 3
+        costs = {}
+        for label, prof, truth in (("on", profile, truth_on), ("off", off, truth_off)):
+            rng = stream_rng(0, 0, "front_left")
+            costs[f"cube {label}"], _, _ = _timed(lambda: simulate_cube(truth, prof, "front_left", 0.55, rng), repeats)
+            costs[f"sar {label}"], _, image = _timed(
+                lambda: simulate_sar(truth, prof, "front_left", 0.55, rng, tracklog), repeats)
+        pulses = int(profile.sar_aperture_m / nyquist_spacing_m(ego_model.radar_params(profile).wavelength_m, np.pi / 4))
+        frames = profile.scene_duration_s * profile.radar_rate_hz * len(ego_model.RADARS)
+        scene_min = frames * (costs["cube on"] + costs["sar on"]) / 60
+        print(f"{name:>8} {image[0].size:11d} {pulses:7d} {costs['cube on']:10.2f} {costs['cube off']:11.2f} "
+              f"{costs['sar on']:9.2f} {costs['sar off']:10.2f} {scene_min:10.1f}")
+
+
 def bench_dataset(name: str, jobs: int, serial_s: float | None) -> float:
     """Write the profile's default dataset with ``jobs`` workers; print a row; return the seconds."""
     profile = get_profile(name)
@@ -127,10 +156,18 @@ def main() -> None:
     parser.add_argument("--crossover", type=int, nargs="*", default=[3, 6, 12], metavar="SCENES",
                         help="tiny-profile scene counts for the jobs 1 vs all-CPUs comparison (none: skip)")
     parser.add_argument("--repeats", type=int, default=3, help="runs per crossover point")
+    parser.add_argument("--paper", action="store_true", help="add the paper profile's per-frame costs (minutes)")
+    parser.add_argument("--frames-only", action="store_true", help="only the per-frame costs")
     args = parser.parse_args()
+    if args.frames_only:
+        print_environment(("numpy", "numba", "scipy"))
+        bench_frames(("tiny", "demo", "paper") if args.paper else ("tiny", "demo"))
+        print_load_after()
+        return
     print_environment(("numpy", "numba", "scipy"))
     bench_cube()
     bench_scene_parts()
+    bench_frames(("tiny", "demo", "paper") if args.paper else ("tiny", "demo"))
     cpus = usable_cpus()
     print(f"\nwhole default datasets ({cpus} usable CPUs, load average before {os.getloadavg()[0]:.1f})")
     print(f"{'profile':>8} {'scenes':>7} {'jobs':>5} {'seconds':>10} {'speed-up':>9} {'MiB':>10}")

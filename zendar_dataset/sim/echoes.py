@@ -31,12 +31,15 @@ def _body_normals_world(world: World, t_s: float) -> tuple[np.ndarray, np.ndarra
 
 
 def car_echoes(
-    world: World, t_s: np.ndarray, radar_enu: np.ndarray, settings: Imperfections, *, mid_index: int | None = None
+    world: World, t_s: np.ndarray, radar_enu: np.ndarray, settings: Imperfections, *, mid_index: int | None = None,
+    reach_m: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, ScattererSet, np.ndarray]:
     """Moving-car returns seen from ``radar_enu`` ``[3]`` at times ``[M]``.
 
     Aspect gains and ghost geometry are evaluated once, at ``t_s[mid_index]`` (default:
-    the middle time; a cube or a SAR aperture lasts a fraction of a second).
+    the middle time; a cube or a SAR aperture lasts a fraction of a second). With ``reach_m``,
+    the effects are computed only for cars and mirrors that can matter within that range of the
+    radar (a car's own echoes are returned for every car, as by ``World.moving_scatterers``).
 
     Returns
     -------
@@ -55,7 +58,12 @@ def car_echoes(
     normal, corner = _body_normals_world(world, float(t[mid]))
     rcs = body.rcs_m2 * aspect_gain(normal, radar[None, :] - position[:, mid], corner, settings)
     parts = [(position, velocity, ScattererSet(body.position_m, rcs, body.swerling1, body.phase_rad), track_id)]
-    wheels = wheel_points(world.cars, t, settings)
+    near_cars = world.cars
+    if reach_m is not None:
+        # A ghost is farther than its car, and a wheel is on it: far cars add neither.
+        near_cars = [car for car in world.cars
+                     if np.linalg.norm(car.trajectory.position_at(t[mid]) - radar) < reach_m + float(np.max(car.size_m))]
+    wheels = wheel_points(near_cars, t, settings)
     if wheels[0].shape[0]:
         parts.append(wheels)
     if settings.multipath:
@@ -65,8 +73,10 @@ def car_echoes(
         all_ids = np.concatenate([p[3] for p in parts])
         all_normal = np.concatenate([normal, np.zeros((all_position.shape[0] - normal.shape[0], 3))])
         all_corner = np.concatenate([corner, np.zeros(all_position.shape[0] - corner.shape[0], bool)])
-        mirrors = mirrors_from_boxes(world.static_boxes, settings)
-        face, point = ghost_pairs(mirrors, radar, all_position[:, mid])
+        mirrors = mirrors_from_boxes(world.static_boxes, settings, radar, reach_m)
+        candidates = np.flatnonzero(np.isin(all_ids, [car.track_id for car in near_cars]))
+        face, point = ghost_pairs(mirrors, radar, all_position[candidates, mid])
+        point = candidates[point]
         if face.shape[0]:
             center, unit = mirrors.center_enu[face], mirrors.normal[face]
             ghost_position = mirror_points(all_position[point], center[:, None, :], unit[:, None, :])

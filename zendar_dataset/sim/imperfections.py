@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -120,6 +121,13 @@ def _lobes(cos_psi: np.ndarray, settings: Imperfections) -> tuple[np.ndarray, np
     return panel, corner
 
 
+@lru_cache(maxsize=8)
+def _lobe_means(settings: Imperfections) -> tuple[float, float]:
+    """Mean of each lobe over all horizontal aspects."""
+    panel, wide = _lobes(np.cos(np.linspace(-np.pi, np.pi, 20001)), settings)
+    return float(np.mean(panel)), float(np.mean(wide))
+
+
 def aspect_gain(normal_world: np.ndarray, line_of_sight_world: np.ndarray, corner: np.ndarray,
                 settings: Imperfections) -> np.ndarray:
     """RCS factor ``[S]`` of car scatterers seen along ``line_of_sight_world`` ``[S, 3]`` (scatterer to radar).
@@ -139,6 +147,6 @@ def aspect_gain(normal_world: np.ndarray, line_of_sight_world: np.ndarray, corne
     horizontal[:, 2] = 0.0
     horizontal /= np.maximum(np.linalg.norm(horizontal, axis=-1, keepdims=True), 1e-12)
     panel, wide = _lobes(dot(normal_world, horizontal), settings)
-    panel_mean, wide_mean = (float(np.mean(lobe)) for lobe in _lobes(np.cos(np.linspace(-np.pi, np.pi, 20001)), settings))
+    panel_mean, wide_mean = _lobe_means(settings)
     gain = np.where(corner, wide / wide_mean, panel / panel_mean)
     return np.where(np.linalg.norm(normal_world, axis=-1) > 0, gain, 1.0)

@@ -55,39 +55,36 @@ class Mirrors:
     box_index: np.ndarray
 
 
-def mirrors_from_boxes(boxes: BoxSet, settings: Imperfections) -> Mirrors:
-    """The four vertical faces of every facade (building) and guard-rail box in ``boxes``."""
+def mirrors_from_boxes(boxes: BoxSet, settings: Imperfections, radar_enu: np.ndarray | None = None,
+                       reach_m: float | None = None) -> Mirrors:
+    """The four vertical faces of every facade (building) and guard-rail box in ``boxes``
+    (with ``radar_enu`` and ``reach_m``: only boxes that come within ``reach_m`` of the radar)."""
     color = boxes.color.astype(np.int64)
     is_building = np.all(color == np.array(COLORS["building"]), axis=1)
     is_rail = np.all(color == np.array(COLORS["rail"]), axis=1)
-    index = np.flatnonzero(is_building | is_rail)
-    centers, normals, alongs, half_lengths, tops, bottoms, reflections, owners = [], [], [], [], [], [], [], []
-    for b in index:
-        yaw = float(boxes.yaw_rad[b])
-        length_axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
-        width_axis = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
-        length, width, height = boxes.size_m[b]
-        ground = boxes.center_enu[b] * np.array([1.0, 1.0, 0.0])
-        top = float(boxes.center_enu[b, 2] + height / 2)
-        bottom = float(boxes.center_enu[b, 2] - height / 2)
-        gamma = settings.rail_reflection if is_rail[b] else settings.facade_reflection
-        for normal, along, offset, half in (
-            (width_axis, length_axis, width / 2, length / 2), (-width_axis, length_axis, width / 2, length / 2),
-            (length_axis, width_axis, length / 2, width / 2), (-length_axis, width_axis, length / 2, width / 2),
-        ):
-            centers.append(ground + normal * offset)
-            normals.append(normal)
-            alongs.append(along)
-            half_lengths.append(half)
-            tops.append(top)
-            bottoms.append(bottom)
-            reflections.append(gamma)
-            owners.append(b)
-    if not centers:
-        empty = np.zeros((0, 3))
-        return Mirrors(empty, empty, empty, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64))
-    return Mirrors(np.array(centers), np.array(normals), np.array(alongs), np.array(half_lengths), np.array(tops),
-                   np.array(bottoms), np.array(reflections), np.array(owners, dtype=np.int64))
+    keep = is_building | is_rail
+    if radar_enu is not None and reach_m is not None:
+        half_diagonal = 0.5 * np.hypot(boxes.size_m[:, 0], boxes.size_m[:, 1])
+        keep &= np.hypot(*(boxes.center_enu[:, :2] - np.asarray(radar_enu)[:2]).T) < reach_m + half_diagonal
+    index = np.flatnonzero(keep)
+    yaw = boxes.yaw_rad[index]
+    zero = np.zeros(index.size)
+    length_axis = np.stack([np.cos(yaw), np.sin(yaw), zero], axis=1)  # [B, 3]
+    width_axis = np.stack([-np.sin(yaw), np.cos(yaw), zero], axis=1)
+    length, width, height = (boxes.size_m[index, k] for k in range(3))
+    ground = boxes.center_enu[index] * np.array([1.0, 1.0, 0.0])
+    # Faces in the order: +width, -width, +length, -length (axis 1), flattened box-major.
+    normal = np.stack([width_axis, -width_axis, length_axis, -length_axis], axis=1)  # [B, 4, 3]
+    along = np.stack([length_axis, length_axis, width_axis, width_axis], axis=1)
+    offset = np.stack([width / 2, width / 2, length / 2, length / 2], axis=1)  # [B, 4]
+    half = np.stack([length / 2, length / 2, width / 2, width / 2], axis=1)
+    top = np.repeat((boxes.center_enu[index, 2] + height / 2)[:, None], 4, axis=1)
+    bottom = np.repeat((boxes.center_enu[index, 2] - height / 2)[:, None], 4, axis=1)
+    gamma = np.where(is_rail[index], settings.rail_reflection, settings.facade_reflection)
+    return Mirrors(
+        (ground[:, None, :] + normal * offset[..., None]).reshape(-1, 3), normal.reshape(-1, 3), along.reshape(-1, 3),
+        half.reshape(-1), top.reshape(-1), bottom.reshape(-1), np.repeat(gamma, 4), np.repeat(index, 4).astype(np.int64),
+    )
 
 
 def mirror_points(points: np.ndarray, center: np.ndarray, normal: np.ndarray) -> np.ndarray:

@@ -138,7 +138,7 @@ def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_r
     world = truth.world
     static = world.static_scatterers
     mid = m // 2
-    moving_pos, _vel, moving, _ids = car_echoes(world, t_s, position[mid], effects, mid_index=mid)
+    moving_pos, _vel, moving, _ids = car_echoes(world, t_s, position[mid], effects, mid_index=mid, reach_m=max_range_m + 1.0)
     # Cull at the middle time first: transforming every scatterer at every time is the cost.
     static_mid = unrotate(rotation[mid], static.position_m - position[mid])
     reach = max_range_m + 1.0

@@ -63,13 +63,14 @@ def wheel_points(
         y = origin[:, 1] + s * body_x + c * body_y
         pos = np.stack([x, y, body_z], axis=-1).reshape(-1, t.shape[0], 3)
         # Velocity: the body's rigid motion plus the rim's motion about the hub.
-        speed = np.linalg.norm(car.trajectory.velocity_at(t), axis=-1)  # [M]
+        body_velocity = car.trajectory.velocity_at(t)  # [M, 3]
+        speed = np.linalg.norm(body_velocity, axis=-1)
         rate = car.trajectory.yaw_rate_at(t)
         spin = speed / r
         rim_vx, rim_vz = spin * rim_z, -spin * rim_x  # d/dt of (r sin, r cos)
         rel_x, rel_y = c * body_x - s * body_y, s * body_x + c * body_y
-        vel_x = car.trajectory.velocity_at(t)[:, 0] - rate * rel_y + c * rim_vx
-        vel_y = car.trajectory.velocity_at(t)[:, 1] + rate * rel_x + s * rim_vx
+        vel_x = body_velocity[:, 0] - rate * rel_y + c * rim_vx
+        vel_y = body_velocity[:, 1] + rate * rel_x + s * rim_vx
         vel = np.stack([vel_x, vel_y, np.broadcast_to(rim_vz, vel_x.shape)], axis=-1).reshape(-1, t.shape[0], 3)
         positions.append(pos)
         velocities.append(vel)
