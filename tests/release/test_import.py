@@ -15,6 +15,7 @@ from tests.release.fixture import COLS, ROWS, SERIALS, T0_S, build_release
 from zendar_dataset.format import open_dataset, stores
 from zendar_dataset.format.validate import validate_dataset
 from zendar_dataset.geometry.frames import ecef_to_sar_pixel
+from zendar_dataset.release import iter_messages
 from zendar_dataset.release.records import gps_seconds_to_ns
 
 
@@ -152,10 +153,15 @@ def test_lidar_and_detection_ecef_positions_land_on_the_bright_pixel(imported):
 
 
 def test_tracklog_cubes_and_camera_index(imported):
-    _, _, out, truth = imported
+    _, src, out, truth = imported
     reader = open_dataset(out).open_scene("2020-02-03_2252_001")
     t = reader.array("tracklog/timestamp_ns")[:]
     assert t.tolist() == [gps_seconds_to_ns(s) for s in truth.tracklog_s]
+    # The column-wise tracklog equals the record-by-record decode of the same file.
+    records = list(iter_messages(src / "2020-02-03_2252" / "001" / "vn200.pbs"))
+    np.testing.assert_array_equal(reader.array("tracklog/position_ecef")[:], [[r["position"][a] for a in "xyz"] for r in records])
+    q = np.array([[r["attitude"][a] for a in "wxyz"] for r in records])
+    np.testing.assert_allclose(reader.array("tracklog/attitude_wxyz")[:], q / np.linalg.norm(q, axis=1, keepdims=True), rtol=0, atol=1e-15)
     cube = reader.array("radar/left/cube")[2]
     assert cube.shape == (16, 8, 4) and np.argwhere(np.abs(cube[..., 0]) > 0).tolist() == [[5, 5]]
     assert reader.calibration.radar("left").range_bin_m == pytest.approx(0.176)

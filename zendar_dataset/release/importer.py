@@ -198,21 +198,29 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
     first, *rest = opened
     for other in rest:
         other.summary.skipped.append(f"a second tracklog; {first.summary.path} is the scene's tracklog")
+    _, offsets, lengths = first.stream.spans()
+    try:
+        # Column-wise: a tracklog has hundreds of thousands of records of one layout.
+        seconds, position, attitude = rec.poses(first.stream.buffer, offsets, lengths)
+        first.summary.records += offsets.shape[0]
+    except WireError:
+        # Some record does not decode: go record by record, so each is reported (or skipped) where it is.
+        decoded = [rec.pose(record) for _, record in _decoded(first)]
+        seconds = np.array([d.timestamp_s for d in decoded])
+        position = np.array([d.position_ecef for d in decoded]).reshape(-1, 3)
+        attitude = np.array([d.attitude_wxyz for d in decoded]).reshape(-1, 4)
+    norms = np.linalg.norm(attitude, axis=1)
+    usable = np.all(np.isfinite(position), axis=1) & np.isfinite(norms) & (norms > 0)
+    bad = int(np.count_nonzero(~usable))
     stamps = _Stamps(first.summary)
-    t, p, q = [], [], []
-    bad = 0
-    for _, record in _decoded(first):
-        pose = rec.pose(record)
-        if not (np.all(np.isfinite(pose.position_ecef)) and np.all(np.isfinite(pose.attitude_wxyz))) or not np.linalg.norm(pose.attitude_wxyz) > 0:
-            bad += 1
-            continue
-        ns = stamps.take(pose.timestamp_s)
-        if ns is None:
-            continue
-        t.append(ns)
-        p.append(pose.position_ecef)
-        q.append(pose.attitude_wxyz / np.linalg.norm(pose.attitude_wxyz))
+    t, keep = [], []
+    for k in np.flatnonzero(usable).tolist():
+        ns = stamps.take(float(seconds[k]))
+        if ns is not None:
+            t.append(ns)
+            keep.append(k)
     stamps.report()
+    p, q = position[keep], attitude[keep] / norms[keep, None]
     if bad:
         first.summary.skipped.append(f"{bad} records with NaN position or attitude")
     if not t:
@@ -220,7 +228,7 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
         return None
     first.summary.written_to = "tracklog"
     scene.assumptions.append("Position.attitude rotates IMU (forward, right, down) vectors into ECEF; quaternions normalised")
-    return np.asarray(t, np.int64), np.asarray(p), np.asarray(q)
+    return np.asarray(t, np.int64), p, q
 
 
 def _infer_sides(images: dict[str, _Opened], scene: SceneSummary) -> dict[str, str]:

@@ -160,6 +160,15 @@ def pose(record: dict) -> Pose:
     return Pose(float(record["timestamp"]), _vec(record.get("position")), _quat(record.get("attitude")))
 
 
+def poses(buf: memoryview, offsets: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every ``Position`` record of a stream, column-wise: ``[K]`` GPS seconds, ``[K, 3]`` ECEF metres,
+    ``[K, 4]`` wxyz (NaN where absent); raises :class:`WireError` at the first record that does not decode."""
+    n = offsets.shape[0]
+    raw = _columns(m.POSITION, buf, offsets, lengths)
+    attitude = np.stack([raw.get(f"attitude.{axis}", np.full(n, np.nan)) for axis in "wxyz"], axis=1)
+    return raw.get("timestamp", np.full(n, np.nan)), _xyz(raw, "position", n), attitude
+
+
 @dataclass
 class Detections:
     """One ``TrackerState``: the frame's time and id, and per-detection columns.

@@ -315,6 +315,7 @@ class Column:
     name: str
     offset: int
     dtype: str
+    signed32: bool = False  # an int32 varint: the low 32 bits, two's complement
 
 
 def _layout(message: Message, buf: memoryview, start: int, end: int) -> tuple[bytes, list[Column]] | None:
@@ -337,8 +338,8 @@ def _layout(message: Message, buf: memoryview, start: int, end: int) -> tuple[by
             columns.extend(Column(f"{spec.name}.{c.name}", c.offset + offset - start, c.dtype) for c in inner[1])
         elif kind in (DOUBLE, FLOAT) and wire == message.wire_type(number):
             columns.append(Column(spec.name, value[0] - start, "<f8" if kind == DOUBLE else "<f4"))
-        elif kind == UINT and wire == VARINT:
-            columns.append(Column(spec.name, position - start, f"varint{after - position}"))
+        elif kind in (UINT, INT32) and wire == VARINT:
+            columns.append(Column(spec.name, position - start, f"varint{after - position}", kind == INT32))
         else:
             return None
     # The tag skeleton: every byte that is not a value. Elements with the same skeleton share the layout.
@@ -422,13 +423,18 @@ def _record_values(records: np.ndarray, column: Column) -> tuple[np.ndarray, np.
     for k, part in enumerate(parts):
         ok &= (part >= 0x80) if k < width - 1 else (part < 0x80)
         value |= (part.astype(np.uint64) & np.uint64(0x7F)) << np.uint64(7 * k)
+    if column.signed32:
+        return (value & np.uint64(0xFFFFFFFF)).astype(np.uint32).view(np.int32).astype(np.float64), ok
     return value.astype(np.float64), ok
 
 
 def decode_repeated_columns(
     element: Message, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray
 ) -> tuple[dict[str, np.ndarray], list[int]]:
-    """Decode repeated sub-messages column-wise into numpy arrays.
+    """Decode many encodings of one message column-wise into numpy arrays.
+
+    The elements are the payloads at ``offsets`` (``lengths`` bytes each): the occurrences of a
+    repeated sub-message, or the records of a stream.
 
     Elements whose encoding has the same length and tag skeleton as the first
     all-fixed-width element are read as strided views (no per-element Python
