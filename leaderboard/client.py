@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from zendar_dataset.errors import ZendarError
-from zendar_leaderboard.scoring import BANDS
+from zendar_leaderboard.scoring import BANDS, format_ap_percent
 
 
 class ServerUnreachable(OSError):
@@ -37,7 +37,11 @@ def _request(url: str, token: str, data: bytes | None = None, timeout_s: float =
 
 
 def format_scores(answer: dict) -> str:
-    """The score table printed by ``submit``."""
+    """The score table printed by ``submit``.
+
+    The server answers AP (and interval ends) as fractions in [0, 1] rounded to 0.001; the table
+    shows them in percent with one decimal.
+    """
     ci = answer.get("ci") or {}
     lines = [
         f"submission {answer['id']} scored on the {answer.get('part', 'public')} part of the test split",
@@ -46,8 +50,8 @@ def format_scores(answer: dict) -> str:
     ]
     for band in BANDS:
         value = answer["ap"].get(band)
-        interval = f"[{ci[band][0]:.1f}, {ci[band][1]:.1f}]" if ci.get(band) else ""
-        lines.append(f"{band:<5} {'n/a' if value is None else f'{value:.1f}':>7}  {interval}")
+        interval = f"[{format_ap_percent(ci[band][0])}, {format_ap_percent(ci[band][1])}]" if ci.get(band) else ""
+        lines.append(f"{band:<5} {format_ap_percent(value, 'n/a'):>7}  {interval}")
     return "\n".join(lines)
 
 

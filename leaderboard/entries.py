@@ -2,6 +2,10 @@
 
 While a round is open each entry shows its score on the public part of the test split; once an
 administrator closes the round, entries are ranked by the private part and show both.
+
+AP (``ap``, ``ap_public``, interval ends in ``ci``, the CSV's ``ap_*`` and ``ci_*`` columns) is a
+fraction in [0, 1] rounded to 0.001 = 0.1 AP points, null (an empty CSV cell) for a band without
+ground truth; only the HTML pages turn it into percent.
 """
 
 from __future__ import annotations
@@ -116,7 +120,7 @@ def _csv_cell(value: Any) -> Any:
 
 
 def to_csv(board: dict[str, Any]) -> str:
-    """The ranking as CSV text (one row per entry, AP in percent)."""
+    """The ranking as CSV text (one row per entry, AP and intervals as fractions in [0, 1])."""
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)

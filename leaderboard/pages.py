@@ -4,6 +4,9 @@ Every value that came from a submission passes through ``html.escape`` (attribut
 links are written only for ``http(s)`` URLs, and the server adds a Content-Security-Policy that runs
 only the page's own scripts (a per-response nonce), so a method name cannot become a script. The
 ranking and entry pages need nothing but themselves: they work from disk as the static export.
+
+The data they are given carries AP as a fraction in [0, 1] (rounded to 0.001); the pages show it in
+percent with one decimal, formatted only here at render time (:func:`fmt_ap`).
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from zendar_dataset.eval.protocol import BANDS_M, MATCH_DISTANCE_M
-from zendar_leaderboard.scoring import BANDS
+from zendar_leaderboard.scoring import BANDS, format_ap_percent
 
 TITLE = "Zendar radar benchmark: moving-car detection"
 
@@ -63,7 +66,8 @@ table.scores { width: auto; min-width: 200px; }
 .charts { margin-top: 0; }
 """
 
-# Sorting in the browser: each AP header re-orders the rows by its band (descending, empty last).
+# Sorting in the browser: each AP header re-orders the rows by its band (descending, empty last);
+# the rows carry the AP fractions of the JSON in data-ap* attributes.
 _SORT_JS = """
 document.querySelectorAll('th button[data-band]').forEach(function (button) {
   button.addEventListener('click', function (event) {
@@ -85,7 +89,8 @@ document.querySelectorAll('th button[data-band]').forEach(function (button) {
 
 _SUBMIT_JS = """
 var form = document.getElementById('upload'), statusBox = document.getElementById('status');
-function ap(v) { return v === null ? 'n/a' : v.toFixed(1); }
+// The API answers AP as a fraction rounded to 0.001: shown in percent with one decimal.
+function ap(v) { return v === null || v === undefined ? 'n/a' : (100 * v).toFixed(1); }
 function say(text, failed) { statusBox.textContent = text; statusBox.className = failed ? 'failed' : ''; }
 function poll(id, token) {
   fetch('/api/submissions/' + id, {headers: {'Authorization': 'Bearer ' + token}})
@@ -133,7 +138,13 @@ def esc(value: Any) -> str:
 
 
 def fmt_ap(value: float | None) -> str:
-    return "–" if value is None else f"{value:.1f}"
+    """An AP fraction (or None) as shown on the pages: percent with one decimal, "–" without ground truth."""
+    return format_ap_percent(value)
+
+
+def fmt_ci(interval: list[float] | None) -> str:
+    """A bootstrap interval of AP fractions as shown under an AP: ``[low, high]`` in percent."""
+    return f"<small>[{fmt_ap(interval[0])}, {fmt_ap(interval[1])}]</small>" if interval else ""
 
 
 def _page(title: str, body: str, *, nonce: str | None, static: bool, script: str = "", root: str = "") -> str:
@@ -194,7 +205,7 @@ def ranking_page(
         cells = []
         for band in BANDS:
             ci = (entry.get("ci") or {}).get(band)
-            extra = f"<small>[{ci[0]:.1f}, {ci[1]:.1f}]</small>" if ci else ""
+            extra = fmt_ci(ci)
             if closed and entry.get("ap_public"):
                 extra += f"<small>public {fmt_ap(entry['ap_public'].get(band))}</small>"
             cells.append(f'<td class="num ap">{fmt_ap(entry["ap"].get(band))}{extra}</td>')
@@ -260,7 +271,7 @@ def entry_page(
         ci = score.get("ci") or {}
         rows = "".join(
             f"<tr><td>{band}</td><td class=\"num ap\">{fmt_ap(score['ap'][band])}"
-            + (f"<small>[{ci[band][0]:.1f}, {ci[band][1]:.1f}]</small>" if ci.get(band) else "")
+            + fmt_ci(ci.get(band))
             + "</td></tr>"
             for band in BANDS
         )

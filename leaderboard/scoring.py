@@ -1,9 +1,10 @@
 """Score a valid submission on the public and private parts with the official evaluator.
 
-Only what the leaderboard shows leaves this module: per-band AP in percent rounded to 0.1 points,
-bootstrap intervals rounded the same way, and precision-recall curves thinned to at most
-``MAX_CURVE_POINTS`` points rounded to 0.001. Counts of ground truths, true and false positives and
-anything per frame are dropped here, so the store never holds them.
+Only what the leaderboard shows leaves this module: per-band AP as a fraction in [0, 1] rounded to
+0.001 (= 0.1 AP points, the shown precision), bootstrap intervals rounded the same way, and
+precision-recall curves thinned to at most ``MAX_CURVE_POINTS`` points rounded to 0.001. Counts of
+ground truths, true and false positives and anything per frame are dropped here, so the store never
+holds them. Pages and the ``submit`` table show AP in percent via :func:`format_ap_percent`.
 """
 
 from __future__ import annotations
@@ -21,15 +22,31 @@ MAX_CURVE_POINTS = 50
 BANDS = ("near", "mid", "far", "all")
 
 
-def ap_points(ap: float | None) -> float | None:
-    """AP in [0, 1] as percent rounded to 0.1 points (None stays None).
+def shown_ap(ap: float | None) -> float | None:
+    """AP in [0, 1] as stored and served: a fraction rounded to 0.001 = 0.1 AP points (None stays None).
+
+    Every JSON the leaderboard emits carries AP in this form, like the evaluator's ``metrics.json``.
 
     Examples
     --------
-    >>> ap_points(0.65249), ap_points(None)
-    (65.2, None)
+    >>> shown_ap(0.65249), shown_ap(1.0), shown_ap(None)
+    (0.652, 1.0, None)
     """
-    return None if ap is None else round(100.0 * ap, 1)
+    return None if ap is None else round(float(ap), 3)
+
+
+def format_ap_percent(ap: float | None, missing: str = "–") -> str:
+    """A stored AP fraction as percent with one decimal, for pages and printed tables.
+
+    The fraction is already rounded to 0.001, so this only moves the decimal point: what a page
+    shows and what the JSON carries never disagree.
+
+    Examples
+    --------
+    >>> format_ap_percent(0.833), format_ap_percent(1.0), format_ap_percent(None)
+    ('83.3', '100.0', '–')
+    """
+    return missing if ap is None else f"{100.0 * ap:.1f}"
 
 
 def _thin_curve(curve: dict[str, list[float]]) -> dict[str, list[float]]:
@@ -58,8 +75,9 @@ def score_part(document: dict, test_split: TestSplit, part: str, *, bootstrap: i
     Returns
     -------
     dict or None
-        ``{"ap": {band: percent | None}, "ci": {band: [low, high]} | None, "pr_curves": {band:
-        {"recall", "precision", "precision_envelope"}}, "n_frames": int}``.
+        ``{"ap": {band: fraction | None}, "ci": {band: [low, high] | None} | None, "pr_curves": {band:
+        {"recall", "precision", "precision_envelope"}}, "n_frames": int}``; AP and interval ends
+        in [0, 1] rounded to 0.001 (:func:`shown_ap`), None for a band without ground truth.
     """
     frame_ids = test_split.part_frame_ids(part)
     if not frame_ids:
@@ -74,11 +92,11 @@ def score_part(document: dict, test_split: TestSplit, part: str, *, bootstrap: i
     if "bootstrap" in metrics:
         ci = {
             band: None if metrics["bootstrap"][band]["low"] is None
-            else [ap_points(metrics["bootstrap"][band]["low"]), ap_points(metrics["bootstrap"][band]["high"])]
+            else [shown_ap(metrics["bootstrap"][band]["low"]), shown_ap(metrics["bootstrap"][band]["high"])]
             for band in BANDS
         }
     return {
-        "ap": {band: ap_points(metrics["ap"][band]) for band in BANDS},
+        "ap": {band: shown_ap(metrics["ap"][band]) for band in BANDS},
         "ci": ci,
         "pr_curves": {band: _thin_curve(metrics["pr_curves"][band]) for band in BANDS},
         "n_frames": len(frame_ids),

@@ -39,9 +39,10 @@ def wait_done(url: str, token: str, submission_id: int, timeout_s: float = 120.0
 
 
 def expected_ap(gt: dict, document: dict, frame_ids) -> dict:
-    """The evaluator's AP on ``frame_ids`` in percent rounded to 0.1 (computed here, independently of the server)."""
+    """The evaluator's AP on ``frame_ids`` as served: a fraction rounded to 0.001 (computed here, independently
+    of the server)."""
     from zendar_dataset.eval import evaluate
 
     part_gt = {"frames": {f: gt["frames"][f] for f in frame_ids}}
     part_pred = {"meta": {}, "results": {f: document["results"][f] for f in frame_ids}}
-    return {band: None if ap is None else round(100 * ap, 1) for band, ap in evaluate(part_pred, part_gt)["ap"].items()}
+    return {band: None if ap is None else round(ap, 3) for band, ap in evaluate(part_pred, part_gt)["ap"].items()}

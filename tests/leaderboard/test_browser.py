@@ -15,6 +15,7 @@ import pytest
 from tests.leaderboard.conftest import ground_truth, start_server, submission
 from tests.leaderboard.helpers import expected_ap
 from zendar_leaderboard.ground_truth import divide_frames
+from zendar_leaderboard.scoring import format_ap_percent
 from zendar_leaderboard.store import Store
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -79,7 +80,7 @@ def test_upload_form_to_ranking_in_chromium(tmp_path, browser):
         browser.find_element(By.ID, "send").click()
         WebDriverWait(browser, 120).until(until.text_to_be_present_in_element((By.ID, "status"), "scored"))
         status_text = browser.find_element(By.ID, "status").text
-        assert f"AP all {ap['all']:.1f}" in status_text
+        assert f"AP all {format_ap_percent(ap['all'])}" in status_text  # the API's fraction, shown in percent
         browser.save_screenshot(str(tmp_path / "2-scored.png"))
 
         browser.find_element(By.ID, "to-ranking").click()
@@ -88,7 +89,7 @@ def test_upload_form_to_ranking_in_chromium(tmp_path, browser):
         assert len(rows) == 2
         ours = next(r for r in rows if "CFAR + SAR <fusion>" in r.text)
         cells = [c.text.split("\n")[0] for c in ours.find_elements(By.CSS_SELECTOR, "td.ap")]
-        assert cells == ["–" if ap[b] is None else f"{ap[b]:.1f}" for b in ("near", "mid", "far", "all")]
+        assert cells == [format_ap_percent(ap[b]) for b in ("near", "mid", "far", "all")]
         assert "Radar <Lab>" in ours.text and "camera" in ours.text
         assert row is not None
         browser.save_screenshot(str(tmp_path / "3-ranking.png"))

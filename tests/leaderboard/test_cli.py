@@ -17,6 +17,7 @@ from tests.leaderboard.conftest import start_server, submission
 from tests.leaderboard.helpers import expected_ap
 from zendar_leaderboard.cli import main
 from zendar_leaderboard.ground_truth import divide_frames
+from zendar_leaderboard.scoring import format_ap_percent
 from zendar_leaderboard.store import Store
 
 COMMAND = [shutil.which("zendar-leaderboard")] if shutil.which("zendar-leaderboard") else [
@@ -93,7 +94,7 @@ def test_submit_waits_and_prints_the_table_and_render_exports_it(tmp_path, gt_fi
         ap = expected_ap(gt, document, divide_frames(list(gt["frames"]))[0])
         assert "scored on the public part" in completed.stdout
         line = next(l for l in completed.stdout.splitlines() if l.startswith("all "))
-        assert f"{ap['all']:.1f}" in line
+        assert format_ap_percent(ap["all"]) in line.split()  # the printed table is in percent
         refused = run("submit", path, "--server", server.url, "--token", "wrong")
         assert refused.returncode == 2 and "(401)" in refused.stderr
         document["results"].pop(next(iter(gt["frames"])))
@@ -108,11 +109,14 @@ def test_submit_waits_and_prints_the_table_and_render_exports_it(tmp_path, gt_fi
     assert completed.returncode == 0, completed.stderr
     board = json.loads((out / "leaderboard.json").read_text())
     (entry,) = board["entries"]
-    assert entry["ap"] == ap and entry["rank"] == 1
+    assert entry["ap"] == ap and entry["rank"] == 1  # fractions in [0, 1], as the API serves them
+    assert all(v is None or 0.0 <= v <= 1.0 for v in entry["ap"].values())
     rows = list(csv.DictReader(io.StringIO((out / "leaderboard.csv").read_text())))
     assert len(rows) == 1 and float(rows[0]["ap_all"]) == ap["all"]
+    assert rows[0]["ap_all"] == repr(ap["all"])  # written as the fraction itself, no float artefacts
     assert rows[0]["method"].startswith("'=")  # a spreadsheet shows it as text, not a formula
     index = (out / "index.html").read_text()
+    assert f'<td class="num ap">{format_ap_percent(ap["all"])}' in index  # the static page shows percent
     assert f'href="entry/{entry["id"]}.html"' in index and "=HYPERLINK(&quot;http://x&quot;)" in index
     assert "http://127.0.0.1" not in index  # works from disk: no link back to the server
     assert (out / "entry" / f"{entry['id']}.html").read_text().count('href="../index.html"') == 1

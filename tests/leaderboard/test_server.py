@@ -104,6 +104,38 @@ def test_a_valid_submission_is_queued_scored_and_ranked_with_the_evaluators_ap(b
     assert status == 404
 
 
+def test_a_perfect_submission_is_served_as_1_and_shown_as_100(board):
+    gt = ground_truth()
+    token = board.store.add_team("oracle")
+    document = submission(gt, method="perfect oracle")
+    document["results"] = {
+        frame_id: [{"x": c["x"], "y": c["y"], "score": 1.0} for c in cars] for frame_id, cars in gt["frames"].items()
+    }
+    _, answer = post_submission(board.url, token, document)
+    done = wait_done(board.url, token, answer["id"])
+    assert done["status"] == "scored"
+    # JSON carries AP as a fraction in [0, 1]: a perfect score is exactly 1.0 in every band with cars.
+    assert done["ap"]["all"] == 1.0 and isinstance(done["ap"]["all"], float)
+    assert all(v in (1.0, None) for v in done["ap"].values())
+    assert all(interval == [1.0, 1.0] for interval in done["ci"].values() if interval)
+    board_json = request(f"{board.url}/api/leaderboard")[1]
+    entry = next(e for e in board_json["entries"] if e["id"] == answer["id"])
+    assert entry["ap"] == done["ap"] and entry["rank"] == 1
+    assert request(f"{board.url}/leaderboard.json")[1]["entries"][0]["ap"]["all"] == 1.0
+    import csv
+
+    rows = csv.DictReader(io.StringIO(request(f"{board.url}/leaderboard.csv")[1]))
+    row = next(r for r in rows if r["method"] == "perfect oracle")
+    assert row["ap_all"] == "1.0" and row["ci_all_low"] == "1.0" and row["ci_all_high"] == "1.0"
+    # Pages show percent with one decimal.
+    _, page = request(f"{board.url}/entry/{answer['id']}")
+    assert '<td class="num ap">100.0' in page and "all: AP 100.0" in page
+    _, ranking = request(f"{board.url}/")
+    row_html = ranking.split(f'id="entry-{answer["id"]}"')[1].split("</tr>")[0]
+    assert row_html.count('<td class="num ap">100.0') == sum(v is not None for v in done["ap"].values())
+    assert "<small>[100.0, 100.0]</small>" in row_html
+
+
 def test_hidden_labels_and_per_frame_results_are_never_served(board):
     gt = ground_truth()
     token = board.store.add_team("prober")

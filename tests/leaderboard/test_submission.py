@@ -9,7 +9,7 @@ import pytest
 
 from tests.leaderboard.conftest import ground_truth, meta, submission
 from zendar_leaderboard.ground_truth import divide_frames, frames_sha256
-from zendar_leaderboard.scoring import ap_points, score_submission
+from zendar_leaderboard.scoring import format_ap_percent, score_submission, shown_ap
 from zendar_leaderboard.submission import check_submission
 
 
@@ -148,8 +148,9 @@ def test_shown_score_of_a_hand_worked_case():
     from zendar_leaderboard.ground_truth import TestSplit
 
     # Public part: scene a (two cars near, one mid). Predictions by score: TP 0.9, FP 0.8, TP 0.7 in
-    # near -> near AP = 1/2 * 1 + 1/2 * 2/3 = 0.8333 -> 83.3; the mid car is missed -> mid AP 0.
-    # 'all': G = 3, TP at 0.9 (P 1, R 1/3), FP 0.8, TP 0.7 (P 2/3, R 2/3) -> 1/3 + 1/3 * 2/3 = 0.5556 -> 55.6.
+    # near -> near AP = 1/2 * 1 + 1/2 * 2/3 = 0.8333 -> 0.833 (page: 83.3); the mid car is missed -> mid AP 0.
+    # 'all': G = 3, TP at 0.9 (P 1, R 1/3), FP 0.8, TP 0.7 (P 2/3, R 2/3) -> 1/3 + 1/3 * 2/3 = 0.5556 -> 0.556
+    # (page: 55.6).
     frames = {
         "a/100": [{"x": 0.0, "y": 10.0}, {"x": -8.0, "y": -3.0}, {"x": 20.0, "y": -5.0}],
         "b/100": [{"x": -40.0, "y": 2.0}],
@@ -167,16 +168,47 @@ def test_shown_score_of_a_hand_worked_case():
         },
     }
     scores = score_submission(document, split, bootstrap=0)
-    assert scores["public"]["ap"] == {"near": 83.3, "mid": 0.0, "far": None, "all": 55.6}
-    assert scores["private"]["ap"] == {"near": None, "mid": None, "far": 100.0, "all": 100.0}
+    # AP is a fraction in [0, 1] rounded to 0.001, written without float artefacts.
+    assert scores["public"]["ap"] == {"near": 0.833, "mid": 0.0, "far": None, "all": 0.556}
+    assert json.dumps(scores["public"]["ap"]) == '{"near": 0.833, "mid": 0.0, "far": null, "all": 0.556}'
+    assert scores["private"]["ap"] == {"near": None, "mid": None, "far": 1.0, "all": 1.0}
     assert scores["public"]["ci"] is None  # one scene: no interval
     assert set(scores["public"]) == {"ap", "ci", "pr_curves", "n_frames"}  # no counts, nothing per frame
     assert scores["gt_sha256"] == split.sha256 and scores["protocol_version"] == "1.0"
 
+    # The pages show the same score in percent with one decimal.
+    from zendar_leaderboard.pages import entry_page, ranking_page
 
-def test_ap_points_round_to_a_tenth():
-    assert ap_points(0.83333) == 83.3 and ap_points(0.55556) == 55.6 and ap_points(1.0) == 100.0
-    assert ap_points(0.0) == 0.0 and ap_points(None) is None
+    entry = {
+        "id": 1, "rank": 1, "method": "hand", "team": "workers", "ap": scores["public"]["ap"],
+        "ci": {"near": [0.8, 0.9], "mid": [0.0, 0.05], "far": None, "all": [0.5, 0.6]},
+        "meta": {"runtime_ms": 1}, "submitted_at": "2026-01-01T00:00:00Z", "part": "public",
+        "protocol_version": "1.0", "evaluator_version": "x", "submission_sha256": "s", "gt_sha256": "g",
+    }
+    board = {"entries": [entry], "round": {"closed": False, "shown": "public"}, "sorted_by": "all"}
+    ranking = ranking_page(board, entry_href=lambda i: f"/entry/{i}", static=False)
+    cells = ("83.3<small>[80.0, 90.0]</small>", "0.0<small>[0.0, 5.0]</small>", "–", "55.6<small>[50.0, 60.0]</small>")
+    assert "".join(f'<td class="num ap">{cell}</td>' for cell in cells) in ranking
+    assert 'data-apnear="0.833"' in ranking and 'data-apfar=""' in ranking  # sorting reads the fractions
+    page = entry_page(entry, {"public": scores["public"]}, static=False)
+    assert '<td class="num ap">83.3</td>' in page and '<td class="num ap">55.6</td>' in page
+    assert '<td class="num ap">0.0</td>' in page and '<td class="num ap">–</td>' in page
+    assert "near: AP 83.3" in page and "0.833" not in page.split("<svg")[0]
+
+
+def test_shown_ap_is_a_fraction_rounded_to_a_thousandth():
+    assert shown_ap(0.83333) == 0.833 and shown_ap(0.55556) == 0.556 and shown_ap(1.0) == 1.0
+    assert shown_ap(0.0) == 0.0 and shown_ap(None) is None
+    assert shown_ap(0.1 + 0.2) == 0.3 and repr(shown_ap(0.1 + 0.2)) == "0.3"  # no float artefacts
+    assert all(repr(shown_ap(k / 1000 + 1e-9)) == repr(k / 1000) for k in range(1001))
+
+
+def test_percent_is_formatted_from_the_stored_fraction():
+    assert format_ap_percent(0.833) == "83.3" and format_ap_percent(0.556) == "55.6"
+    assert format_ap_percent(1.0) == "100.0" and format_ap_percent(0.0) == "0.0"
+    assert format_ap_percent(None) == "–" and format_ap_percent(None, "n/a") == "n/a"
+    # Every stored value shows as exactly its own tenth of a point (0.007 is 0.7, 0.29 is 29.0 ...).
+    assert all(format_ap_percent(shown_ap(k / 1000)) == f"{k // 10}.{k % 10}" for k in range(1001))
 
 
 def test_labels_from_a_dataset_root_and_from_export_gt_have_one_checksum(tmp_path):
