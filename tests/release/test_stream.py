@@ -246,3 +246,15 @@ def test_lidar_columns_of_evenly_spaced_points_ending_the_file(tmp_path):
     np.testing.assert_array_equal(sweep.position_ecef, g)
     np.testing.assert_array_equal(sweep.position_local, local)
     assert np.all(sweep.intensity == 5)
+
+
+def test_a_record_that_does_not_decode_is_reported_at_its_offset_or_skipped(tmp_path):
+    records = [_image_2020(k) for k in range(4)]
+    records[2] = b"\x0f" + records[2][1:]  # the first tag now says wire type 7
+    path = enc.write_stream(tmp_path / "x_images.pbs", records)
+    third = 8 + 2 * (4 + len(records[0]))
+    with ReleaseStream(path) as stream, pytest.raises(ZendarFormatError, match=f"byte offset {third}.*does not decode"):
+        list(stream)
+    with ReleaseStream(path, skip_corrupt=True) as stream:
+        assert [r["frame_id"] for r in stream] == [0, 1, 3]
+        assert [(loss.offset, loss.size_bytes) for loss in stream.losses] == [(third, 4 + len(records[2]))]
