@@ -84,6 +84,27 @@ def test_ctrl_c_at_any_moment_exits_130_without_traceback_and_the_rerun_matches(
     assert [name for name in files if files[name] != expected[name]] == []
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        [str(ZENDAR_DATA.parent / "zendar-eval"), "predictions.json", "--gt", "gt.json"],
+        [sys.executable, "-m", "zendar_dataset.cli.data", "info", "."],
+        [sys.executable, "-m", "zendar_dataset.cli.eval", "predictions.json", "--gt", "gt.json"],
+    ],
+    ids=["zendar-eval", "python -m cli.data", "python -m cli.eval"],
+)
+def test_ctrl_c_while_a_tool_starts_exits_130_without_traceback(command, tmp_path):
+    process = subprocess.Popen(
+        command, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=_start_with_sigint(signal.SIG_DFL),
+    )
+    # At once: held pending (blocked) until the tool's handler is in place, wherever that is reached.
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, (process.returncode, stderr)
+    assert "Traceback" not in stderr and stderr.strip().splitlines()[-1] == "interrupted", stderr
+
+
 def _sigint_inside(wrap):
     """A command body that receives SIGINT and lets ``wrap`` turn the KeyboardInterrupt into something else."""
 
