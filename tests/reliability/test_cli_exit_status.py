@@ -107,6 +107,7 @@ def test_an_unexpected_exception_is_one_line_and_exit_1(capsys):
     )
 
 
+@pytest.mark.slow
 def test_a_closed_output_pipe_is_no_traceback(root):
     # The reader of stdout goes away at once (like `| head` that has read enough).
     process = subprocess.Popen(

@@ -58,6 +58,7 @@ WRITERS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["convert-hdf5", "convert-zarr"])
 def test_convert_running_out_of_space_midway_exits_1_and_leaves_nothing(tmp_path, source, case):
     command, backend = WRITERS[case]
