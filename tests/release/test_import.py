@@ -299,3 +299,18 @@ def test_single_message_model_raw_packets_and_unknown_streams(tmp_path, capsys):
     reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
     assert reader.array("radar/left/cube").shape == (5, 16, 8, 4)
     assert reader.sensors("radar") == ["left"]
+
+
+def test_paper_sized_cubes_without_a_model_take_the_paper_layout(tmp_path, capsys):
+    src = tmp_path / "release"
+    cube = np.zeros((512, 256, 4), np.complex64)
+    cube[100, 128 + 7, :] = [1, 1j, -1, -1j]
+    enc.write_stream(src / "range_Doppler" / "right_rd.pbs", [enc.rd_frame(T0_S + k * 0.05, cube) for k in range(2)])
+    status, stdout, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0 and "the paper's cube layout is assumed" in stdout
+    reader = open_dataset(tmp_path / "out").open_scene("release")
+    stored = reader.array("radar/right/cube")[1]
+    np.testing.assert_array_equal(stored, cube)
+    calibration = reader.calibration.radar("right")
+    assert calibration.rx_positions_m.shape == (4, 3) and calibration.range_bin_m == pytest.approx(0.176)
+    assert validate_dataset(tmp_path / "out") == []

@@ -291,7 +291,22 @@ def _enu_origin(tracklog, images: dict[str, _Opened], scene: SceneSummary) -> di
     return {"lat_deg": lat, "lon_deg": lon, "height_m": height}
 
 
-def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSummary) -> dict:
+PAPER_CUBE_SHAPE = (512, 256, 4)  # paper §3.1: range bins, Doppler bins, receive channels
+
+
+def _paper_model() -> rec.RangeDopplerModel:
+    """The paper's cube layout for frames that come without a model: 512 × 0.176 m range bins, 256 Doppler
+    bins centred on zero (bin size a placeholder) and 4 receivers half a wavelength apart along the
+    release radar frame's x (left) axis (placeholder positions)."""
+    r, d, a = PAPER_CUBE_SHAPE
+    wavelength = SPEED_OF_LIGHT_MPS / PAPER_CENTER_FREQUENCY_HZ
+    rx = np.column_stack([np.arange(a) * wavelength / 2, np.zeros(a), np.zeros(a)])
+    return rec.RangeDopplerModel(
+        a, (0.0, PAPER_RANGE_BIN_M, r), (-(d // 2) * PLACEHOLDER_DOPPLER_BIN_MPS, PLACEHOLDER_DOPPLER_BIN_MPS, d), rx, wavelength
+    )
+
+
+def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSummary, assumed_model: bool = False) -> dict:
     side = name if name in SIDE_Q_WXYZ else None
     rotation = list(SIDE_Q_WXYZ[side]) if side else [1.0, 0.0, 0.0, 0.0]
     scene.assumptions.append(
@@ -317,10 +332,18 @@ def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSum
         }
     # The release's radar frame is x left, y up, z forward; format v1's is x forward, y left, z up.
     rx = model.rx_positions_m[:, [2, 0, 1]] if model.rx_positions_m.size else np.zeros((model.num_rx, 3))
-    scene.assumptions.append(
-        f"radar {name!r}: receiver positions taken in the release's radar frame (x left, y up, z forward) and "
-        f"reordered to format v1's (x boresight, y left, z up); bandwidth = c / (2 * range bin)"
-    )
+    if assumed_model:
+        scene.assumptions.append(
+            f"radar {name!r}: no RangeDopplerImageModel; its frames are 8 x 512 x 256 x 4 bytes, so the paper's "
+            f"cube layout is assumed: 512 range bins of {PAPER_RANGE_BIN_M} m, 256 Doppler bins centred on zero, "
+            f"4 receivers at {PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz; the Doppler bin ({PLACEHOLDER_DOPPLER_BIN_MPS} m/s) "
+            f"and the receiver positions (half-wavelength line) are placeholders"
+        )
+    else:
+        scene.assumptions.append(
+            f"radar {name!r}: receiver positions taken in the release's radar frame (x left, y up, z forward) and "
+            f"reordered to format v1's (x boresight, y left, z up); bandwidth = c / (2 * range bin)"
+        )
     return {
         "rotation_wxyz": rotation,
         "translation_m": [0.0, 0.0, 0.0],
@@ -371,11 +394,17 @@ class _SceneImport:
             return sides.get(serial, serial)
 
         models = self._models(list(rd_frames))
+        assumed_models = set()
+        for name, opened in rd_frames.items():
+            first = next((record for _, record in _decoded(opened, probe=True)), None)
+            if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(PAPER_CUBE_SHAPE)):
+                models[name] = _paper_model()
+                assumed_models.add(name)
         radars = sorted({rename(s) for s in images} | {rename(s) for s in points} | set(rd_frames))
         calibration = {"imu": {"rotation_wxyz": list(EGO_Q_IMU_WXYZ), "translation_m": [0.0, 0.0, 0.0]}}
         scene.assumptions.append("IMU at the ego origin, axes forward-right-down (ego_T_imu: 180 degrees about x)")
         for radar in radars:
-            calibration[radar] = _radar_entry(radar, models.get(radar), scene)
+            calibration[radar] = _radar_entry(radar, models.get(radar), scene, radar in assumed_models)
         lidars = self._keyed(self._by_kind("LidarPointsFrame"), "")
         cameras = self._keyed(self._by_kind("CameraIndexRecord"), "")
         for name in list(lidars) + list(cameras):
