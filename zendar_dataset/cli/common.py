@@ -104,7 +104,7 @@ def writing(output: str | os.PathLike) -> Iterator[None]:
 def print_problems(problems: list[str], problems_file: str | None = None) -> None:
     """Print ``problems`` to stderr: the first :data:`MAX_PROBLEMS_SHOWN` and how many there are."""
     if len(problems) == 1:
-        print(f"error: {problems[0]}", file=sys.stderr)
+        print(f"error: {problems[0]}" + (f" (also in {problems_file})" if problems_file else ""), file=sys.stderr)
         return
     where = f"; all of them are in {problems_file}" if problems_file else ""
     print(f"error: {len(problems)} problems found{where}:", file=sys.stderr)
