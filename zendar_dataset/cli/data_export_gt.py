@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with writing(args.output):
             n_frames = export_ground_truth(args.root, args.split, args.output, overwrite=args.overwrite)
-    except FileExistsError as exc:
+    except FileExistsError:
         raise ZendarError(f"{args.output} exists already (pass --overwrite to replace it)") from None
     print(f"wrote {args.output}: {n_frames} frames of split {args.split!r}")
     return EXIT_OK
