@@ -115,7 +115,9 @@ def test_evaluator_outputs_are_created_with_the_users_umask(tmp_path, umask, out
     (tmp_path / "p.json").write_text(json.dumps({"results": {"s/1": [{"x": 40.0, "y": 0.0, "score": score}]}}))
     previous = os.umask(umask)
     try:
-        run_in_process("zendar-eval", tmp_path / "p.json", "--gt", tmp_path / "gt.json", "--out", tmp_path / "o", "--plot")
+        run_in_process(
+            "zendar-eval", tmp_path / "p.json", "--gt", tmp_path / "gt.json", "--out", tmp_path / "o", "--plot"
+        )
     finally:
         os.umask(previous)
     assert stat.S_IMODE((tmp_path / "o" / output).stat().st_mode) == 0o666 & ~umask
