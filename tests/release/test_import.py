@@ -314,3 +314,20 @@ def test_paper_sized_cubes_without_a_model_take_the_paper_layout(tmp_path, capsy
     calibration = reader.calibration.radar("right")
     assert calibration.rx_positions_m.shape == (4, 3) and calibration.range_bin_m == pytest.approx(0.176)
     assert validate_dataset(tmp_path / "out") == []
+
+
+def test_sar_frames_of_another_shape_are_skipped_and_counted(tmp_path):
+    from zendar_dataset.release import import_release
+
+    attitude, position = (0.5, -0.5, 0.5, -0.5), (-2.7e6, -4.26e6, 3.88e6)
+    origin = (position[0] + 1.0, position[1], position[2])
+    records = [
+        enc.image_2020(T0_S + k / 10, attitude, position, k, origin, (0.04, 0, 0), (0, 0.04, 0), rows, 6, bytes(4 * 6 * rows))
+        for k, rows in enumerate((4, 5, 4))
+    ]
+    enc.write_stream(tmp_path / "src" / "X_images.pbs", records)
+    summary = import_release(tmp_path / "src", tmp_path / "out")
+    assert "    skipped: 1 frames: shape [5, 6] differs from the stream's first [4, 6]" in summary.lines()
+    reader = open_dataset(tmp_path / "out").open_scene("src")
+    (radar,) = reader.sensors("sar")  # serial X, or the side its images lie on
+    assert reader.array(f"sar/{radar}/image").shape == (2, 4, 6)

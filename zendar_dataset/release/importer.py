@@ -513,7 +513,8 @@ class _SceneImport:
     def _write_sar(self, out, name: str, serial: str, opened: _Opened, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
         holds_seen = set()
-        bad = {}
+        bad: dict[str, int] = {}
+        shape = None
         for _, record in _decoded(opened):
             frame = rec.sar_frame(opened.stream.kind, record)
             try:
@@ -524,9 +525,15 @@ class _SceneImport:
             if not all(np.all(np.isfinite(v)) for v in (frame.origin_ecef, frame.di_ecef, frame.dj_ecef)):
                 bad["NaN in the image model"] = bad.get("NaN in the image model", 0) + 1
                 continue
+            if shape is not None and image.shape != shape:
+                # Format v1 keeps one image shape per stream.
+                why = f"shape {list(image.shape)} differs from the stream's first {list(shape)}"
+                bad[why] = bad.get(why, 0) + 1
+                continue
             ns = stamps.take(frame.timestamp_s)
             if ns is None:
                 continue
+            shape = image.shape
             out.append_sar(name, ns, image, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, [ns, ns])
             holds_seen.add(holds)
         stamps.report()
