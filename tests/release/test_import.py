@@ -331,3 +331,25 @@ def test_sar_frames_of_another_shape_are_skipped_and_counted(tmp_path):
     reader = open_dataset(tmp_path / "out").open_scene("src")
     (radar,) = reader.sensors("sar")  # serial X, or the side its images lie on
     assert reader.array(f"sar/{radar}/image").shape == (2, 4, 6)
+
+
+@pytest.mark.parametrize(
+    "doppler_start, range_start, expected",
+    [(-0.4, 0.0, "centred"), (0.0, 0.0, "fftshift"), (0.0, 1.5, "skipped"), (0.13, 0.0, "skipped")],
+)
+def test_doppler_axis_conventions(tmp_path, capsys, doppler_start, range_start, expected):
+    src = tmp_path / "release"
+    cube = (np.arange(6 * 8 * 2) + 1j).astype(np.complex64).reshape(6, 8, 2)
+    enc.write_stream(src / "left_model.pbs", [enc.rd_model(2, (range_start, 0.2, 6), (doppler_start, 0.1, 8), [(0, 0, 0), (0.002, 0, 0)], 0.0039)])
+    enc.write_stream(src / "left_rd.pbs", [enc.rd_frame(T0_S, cube)])
+    status, stdout, _ = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0
+    scene = open_dataset(tmp_path / "out").open_scene("release")
+    if expected == "skipped":
+        assert "radar" not in {s.split("/")[0] for s in scene.streams} and ("range axis starts" in stdout or "neither centred" in stdout)
+        return
+    stored = scene.array("radar/left/cube")[0]
+    np.testing.assert_array_equal(stored, cube if expected == "centred" else np.fft.fftshift(cube, axes=1))
+    # Format v1 puts zero velocity in bin D/2 = 4: the release's bin whose velocity is 0 m/s lands there.
+    zero_velocity_bin = int(round(-doppler_start / 0.1))  # start + k * delta == 0
+    np.testing.assert_array_equal(stored[:, 4], cube[:, zero_velocity_bin])
