@@ -25,7 +25,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("src", metavar="SRC", help="release folder, or one stream file")
     parser.add_argument("out", metavar="OUT", help="dataset root to create or resume")
     parser.add_argument("--scene-id", default=None, metavar="ID", help="scene id (only when SRC holds one scene)")
-    parser.add_argument("--split", default="train", metavar="S", help=f"split of the imported scenes (default: train; usual: {', '.join(SPLITS)})")
+    parser.add_argument(
+        "--split", default="train", metavar="S", help=f"split of the imported scenes (default: train; usual: {', '.join(SPLITS)})"
+    )
     parser.add_argument("--skip-corrupt", action="store_true",
                         help="skip truncated or corrupt stretches of streams (reported) instead of stopping")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")

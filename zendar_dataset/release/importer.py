@@ -147,7 +147,9 @@ def _finish(opened: _Opened) -> None:
     if opened.stream is not None:
         opened.summary.empty_records = opened.stream.empty_records
         opened.summary.lost_bytes = sum(loss.size_bytes for loss in opened.stream.losses)
-        opened.summary.skipped.extend(f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses)
+        opened.summary.skipped.extend(
+            f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses
+        )
 
 
 def _iter(opened: _Opened, probe: bool = False):
@@ -179,14 +181,15 @@ class _Stamps:
 
     def take(self, seconds: float) -> int | None:
         if not np.isfinite(seconds) or seconds < 0:
-            self.dropped["non-finite or negative timestamp"] = self.dropped.get("non-finite or negative timestamp", 0) + 1
-            return None
+            return self._drop("non-finite or negative timestamp")
         ns = rec.gps_seconds_to_ns(seconds)
         if self.last is not None and ns <= self.last:
-            self.dropped["timestamp not after the previous record's"] = self.dropped.get("timestamp not after the previous record's", 0) + 1
-            return None
+            return self._drop("timestamp not after the previous record's")
         self.last = ns
         return ns
+
+    def _drop(self, why: str) -> None:
+        self.dropped[why] = self.dropped.get(why, 0) + 1
 
     def report(self) -> None:
         self.summary.skipped.extend(f"{n} records: {why}" for why, n in self.dropped.items())
@@ -544,7 +547,8 @@ class _SceneImport:
         magnitude_only = holds_seen == {"magnitude"}
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
         self.summary.assumptions += [
-            f"sar/{name}: " + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
+            f"sar/{name}: "
+            + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
             f"sar/{name}: aperture start/end are not in the release; aperture_ns = [t, t]",
         ]
 
@@ -636,7 +640,9 @@ class _SceneImport:
                 f"lidar/{name}: the release gives no local positions (or ECEF ones), so points are in the scene's ENU frame"
             )
         else:
-            self.summary.assumptions.append(f"lidar/{name}: LidarPoint.position_local taken as the lidar frame (unknown in the release)")
+            self.summary.assumptions.append(
+                f"lidar/{name}: LidarPoint.position_local taken as the lidar frame (unknown in the release)"
+            )
 
     def _write_camera_index(self, out, name: str, opened: _Opened) -> None:
         stamps = _Stamps(opened.summary)
@@ -666,7 +672,9 @@ def _existing_splits(out: pathlib.Path) -> dict[str, list[str]]:
         document = json.loads(path.read_text(encoding="utf-8"))
         return {k: list(v) for k, v in document["splits"].items()}
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ZendarError(f"{path}: expected the dataset.json of an earlier import to resume, found unreadable JSON ({exc})") from None
+        raise ZendarError(
+            f"{path}: expected the dataset.json of an earlier import to resume, found unreadable JSON ({exc})"
+        ) from None
 
 
 def import_release(
@@ -715,7 +723,8 @@ def import_release(
         raise ZendarError(f"{src_path}: no stream files (*.pbs, *.pbs.gz, *.pb) found")
     if scene_id is not None:
         if len(scenes) != 1:
-            raise ZendarError(f"--scene-id: {src_path} holds {len(scenes)} scenes ({', '.join(s.scene_id for s in scenes)}); give it for one scene only")
+            names = ", ".join(s.scene_id for s in scenes)
+            raise ZendarError(f"--scene-id: {src_path} holds {len(scenes)} scenes ({names}); give it for one scene only")
         scenes[0].scene_id = scene_id
     splits = _existing_splits(out_path)
     summary = ImportSummary(str(src_path), str(out_path))

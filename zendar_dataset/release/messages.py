@@ -134,7 +134,12 @@ LIDAR_FIRING = _msg(
     "LidarFiringBlock", (), f2=("block_identifier", UINT), f3=("rotational_position", UINT), f4=("laser_returns", LIDAR_RETURN, True)
 )
 LIDAR_DATA_FRAME = _msg(
-    "LidarDataFrame", (1, 2), f1=("timestamp", TIME_RECORD), f2=("firings", LIDAR_FIRING, True), f3=("mode", UINT), f4=("sensor_type", UINT)
+    "LidarDataFrame",
+    (1, 2),
+    f1=("timestamp", TIME_RECORD),
+    f2=("firings", LIDAR_FIRING, True),
+    f3=("mode", UINT),
+    f4=("sensor_type", UINT),
 )
 CHIRP_RESPONSE = _msg(
     "ChirpResponse",
