@@ -9,8 +9,8 @@ fields (``num_radar_scatterers``, ``num_lidar_points``) where the scene has them
 
 from __future__ import annotations
 
-import os
 import errno
+import os
 import pathlib
 
 import numpy as np
@@ -19,8 +19,8 @@ from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.reader import SceneReader, open_dataset
 from zendar_dataset.format.schema import CAR_FIELDS, LABEL_OPTIONAL_FIELD_NAMES, LABELS, frame_id
 from zendar_dataset.format.writer import write_json_atomic
-
 from zendar_dataset.output_location import refuse_output_inside
+
 
 def scene_ground_truth(scene: SceneReader) -> dict[str, list[dict]] | None:
     """Cars per frame of one scene, or None when its labels are withheld."""
@@ -93,17 +93,17 @@ def export_ground_truth(
         When ``out_path`` is a directory, or a parent of it is a file.
     """
     out_path = pathlib.Path(out_path)
-    if out_path.exists() and not overwrite:
-        raise FileExistsError(errno.EEXIST, "exists already (pass overwrite=True to replace it)", str(out_path))
-    frames = ground_truth_frames(root, split, storage_options)
     refuse_output_inside(out_path, datasets=(root,), what="output")
     if out_path.is_dir():
         raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(out_path))
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out_path, {"frames": frames})
-    return len(frames)
+    if out_path.exists() and not overwrite:
+        raise FileExistsError(errno.EEXIST, "exists already (pass overwrite=True to replace it)", str(out_path))
+    frames = ground_truth_frames(root, split, storage_options)
     for parent in (out_path.parent, *out_path.parent.parents):
         if parent.exists():
             if not parent.is_dir():
                 raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(parent))
             break
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out_path, {"frames": frames})
+    return len(frames)
