@@ -285,8 +285,9 @@ def _refuse_unguarded_main(jobs: int) -> None:
     ``if __name__ == "__main__":`` guard each worker would call this function
     again and die at start-up. Detected by finding the main script's
     module-level frame on the stack and checking, in its syntax tree, whether
-    the executing statement sits under such a guard. Interactive sessions,
-    ``python -c`` and notebooks have no script to re-run and are not refused.
+    the executing line sits in the body of such a guard (at any depth).
+    Interactive sessions, ``python -c`` and notebooks have no script to re-run
+    and are not refused.
     """
     main = sys.modules.get("__main__")
     path = getattr(main, "__file__", None)
@@ -302,11 +303,9 @@ def _refuse_unguarded_main(jobs: int) -> None:
     except (OSError, UnicodeDecodeError, SyntaxError, ValueError):
         return  # no source to inspect; a worker that dies at start-up still fails the run
     line = frame.f_lineno
-    for statement in tree.body:
-        if statement.lineno <= line <= (statement.end_lineno or statement.lineno):
-            if _is_main_guard(statement):
-                return
-            break
+    for node in ast.walk(tree):
+        if _is_main_guard(node) and node.body[0].lineno <= line <= (node.body[-1].end_lineno or line):
+            return
     raise ZendarError(
         f"synthesize_dataset(jobs={jobs}) was called at the top level of {path} (line {line}) without an "
         "'if __name__ == \"__main__\":' guard; worker processes re-run that script and would start again. "
@@ -314,7 +313,7 @@ def _refuse_unguarded_main(jobs: int) -> None:
     )
 
 
-def _is_main_guard(statement: ast.stmt) -> bool:
+def _is_main_guard(statement: ast.AST) -> bool:
     """Whether ``statement`` is ``if __name__ == "__main__":`` (either operand order)."""
     if not isinstance(statement, ast.If) or not isinstance(statement.test, ast.Compare):
         return False
