@@ -258,3 +258,11 @@ def test_a_record_that_does_not_decode_is_reported_at_its_offset_or_skipped(tmp_
     with ReleaseStream(path, skip_corrupt=True) as stream:
         assert [r["frame_id"] for r in stream] == [0, 1, 3]
         assert [(loss.offset, loss.size_bytes) for loss in stream.losses] == [(third, 4 + len(records[2]))]
+
+
+def test_unknown_kind_name_is_a_user_error(tmp_path):
+    from zendar_dataset.errors import ZendarError
+
+    path = enc.write_stream(tmp_path / "vn200.pbs", [enc.position_record(1.26e9, ATT, POS, 1)])
+    with pytest.raises(ZendarError, match="kind: expected one of .*'Position'.*, found 'Pose'"):
+        ReleaseStream(path, kind="Pose")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from zendar_dataset.errors import ZendarError
 from zendar_dataset.release.wire import BYTES, DOUBLE, FLOAT, INT32, STRING, UINT, Field, Message
 
 
@@ -218,10 +219,10 @@ KIND_NAMES = tuple(dict.fromkeys(kind.name for kind in KINDS))
 
 
 def kinds_named(name: str | None) -> tuple[Kind, ...]:
-    """Every generation of message ``name`` (all kinds when None); ValueError for an unknown name."""
+    """Every generation of message ``name`` (all kinds when None); ZendarError for an unknown name."""
     if name is None:
         return KINDS
     found = tuple(kind for kind in KINDS if kind.name == name)
     if not found:
-        raise ValueError(f"unknown message kind {name!r}; expected one of {list(KIND_NAMES)}")
+        raise ZendarError(f"kind: expected one of {list(KIND_NAMES)}, found {name!r}")
     return found
