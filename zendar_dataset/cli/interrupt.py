@@ -44,7 +44,8 @@ def _raise_interrupt(signum: int, frame: object) -> None:
 
 def _install(handler) -> object:
     previous = signal.signal(signal.SIGINT, handler)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if hasattr(signal, "pthread_sigmask"):  # POSIX only
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     return previous
 
 
