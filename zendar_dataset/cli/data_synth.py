@@ -26,8 +26,9 @@ def default_jobs(profile: str, n_scenes: int) -> int:
     A spawned worker costs seconds before its first scene (interpreter, imports, compiled
     kernels loaded), and scenes are handed out whole, so the last round leaves CPUs idle. On
     the 2-core reference machine (``benchmarks/bench_sim.py``) a ``tiny`` scene takes about a
-    second and its 3-scene dataset was slower with 2 workers than in one process (5.5-6.3 s
-    against 4.7 s); a ``demo`` dataset (5 scenes of about 30 s) took 1 min 33 s against 2 min 34 s.
+    second and its 3-scene dataset was slower with 2 workers than in one process (idle: 5.5-6.3 s
+    against 4.7 s; under a load average of 10: 59 s against 39 s); a ``demo`` dataset (5 scenes of
+    about 30 s) took 1 min 33 s against 2 min 34 s.
     """
     from zendar_dataset.sim.generate import usable_cpus
 
