@@ -204,3 +204,17 @@ def test_two_chunks_per_frame_with_one_missing_is_refused_by_reader_and_validate
     with pytest.raises(ZendarFormatError) as info:
         open_dataset(root).open_scene("s0")
     assert message in info.value.problems
+
+
+@pytest.mark.parametrize("backend", ["zarr", "hdf5"])
+def test_the_default_read_path_hashes_nothing(tmp_path, backend, monkeypatch):
+    root = make_small_dataset(tmp_path / "ds", backend)
+    calls = []
+    monkeypatch.setattr("zendar_dataset.format.checksums.crc32c", lambda values: calls.append(values.shape) or 0)
+    dataset = ZendarDataset(root, "train", streams=("radar", "sar", "camera", "lidar", "tracklog"))
+    for index in range(len(dataset)):
+        dataset[index]
+    assert calls == []
+    with pytest.raises(ZendarFormatError, match=r"s0: radar/left/timestamp_ns: chunk \[0\]: expected crc32c"):
+        ZendarDataset(root, "train", streams=("radar",), verify_checksums=True)  # every checksum now reads as 0
+    assert calls

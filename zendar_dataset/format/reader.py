@@ -218,6 +218,7 @@ class StoredArray:
         self._checksummed = checksummed or verify_crc32c is not None
         self._crc32c = verify_crc32c
         self._verify = verify_crc32c is not None
+        self._missing: set[tuple[int, ...]] | None = None  # HDF5: listed once (a lookup per chunk is slow)
         self._direct = stores.direct_frame_reader(array, missing_is_fill=not self._checksummed)
 
     @property
@@ -266,7 +267,7 @@ class StoredArray:
             if not self._checksummed:
                 return self.raw[key]
             return self._read_checked(key)
-        except IndexError:
+        except (IndexError, ZendarFormatError):
             raise
         except stores.DECODE_ERRORS as exc:
             raise self._corrupt(exc) from exc
@@ -290,6 +291,8 @@ class StoredArray:
                 out[...] = self.raw[start:stop]
             else:
                 out[...] = self._read_checked(slice(start, stop))
+        except ZendarFormatError:
+            raise
         except stores.DECODE_ERRORS as exc:
             raise self._corrupt(exc) from exc
 
@@ -328,9 +331,12 @@ class StoredArray:
         lo, hi, normal = span if span is not None else (0, shape[0], key)
         grid = checksums.grid_shape(shape, chunks)
         first_chunk, end_chunk = lo // chunks[0], -(-hi // chunks[0])
-        for coords in np.ndindex(max(0, end_chunk - first_chunk), *grid[1:]):
+        if not stores.is_zarr(self.raw) and self._missing is None:
+            self._missing = set(stores.missing_chunks(self.raw))
+        for coords in np.ndindex(max(0, end_chunk - first_chunk), *grid[1:]) if self._missing != set() else ():
             coords = (coords[0] + first_chunk, *coords[1:])
-            if not stores.chunk_stored(self.raw, coords):
+            stored = coords not in self._missing if self._missing is not None else stores.chunk_stored(self.raw, coords)
+            if not stored:
                 raise ZendarFormatError(
                     f"{self.scene_id}: {self.path}: expected every chunk stored (the store records checksums), "
                     f"found chunk {list(coords)} missing"

@@ -168,6 +168,10 @@ def open_store(
     return OpenStore(backend, handle, [handle.close])
 
 
+def is_zarr(node: Any) -> bool:
+    return isinstance(node, (zarr.Array, zarr.Group))
+
+
 def is_array(node: Any) -> bool:
     return isinstance(node, (zarr.Array, h5py.Dataset))
 
@@ -300,11 +304,19 @@ def missing_chunks(array: Any) -> list[tuple[int, ...]]:
         return [c for c in np.ndindex(*grid) if base + array.metadata.encode_chunk_key(c) not in keys]
     if chunks is None:
         return []  # contiguous storage: the data block exists with the dataset
-    stored = set()
-    for i in range(array.id.get_num_chunks()):
-        offset = array.id.get_chunk_info(i).chunk_offset
-        stored.add(tuple(int(o) // int(c) for o, c in zip(offset, chunks)))
     grid = tuple(-(-n // c) for n, c in zip(shape, chunks))
+    if array.id.get_num_chunks() == int(np.prod(grid)):
+        return []  # the common case, without a lookup per chunk (slow in HDF5's v1 B-trees)
+    stored = set()
+
+    def note(info: Any) -> None:
+        stored.add(tuple(int(o) // int(c) for o, c in zip(info.chunk_offset, chunks)))
+
+    if hasattr(array.id, "chunk_iter"):  # one pass over the index (HDF5 >= 1.14)
+        array.id.chunk_iter(note)
+    else:
+        for i in range(array.id.get_num_chunks()):
+            note(array.id.get_chunk_info(i))
     return [c for c in np.ndindex(*grid) if c not in stored]
 
 
