@@ -1,7 +1,6 @@
 """Lidar, camera and tracklog models against geometry worked by hand."""
 
 import numpy as np
-import pytest
 
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.geometry.quaternion import quat_wxyz_to_matrix
