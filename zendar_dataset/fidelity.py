@@ -410,6 +410,6 @@ def format_report(report: dict[str, Any]) -> str:
     for name, values, fmt in rows:
         lines.append(f"{name:28s}" + "".join(f"{fmt(values.get(b)):>8s}" for b in (*BANDS, "all")))
     det = report["cfar_detections"]
-    lines.append(f"{'CFAR detections moving/static':28s}" + "".join(
-        f"{det[b]['on_moving_cars']:>4d}/{det[b]['static']:<4d}"[:8].rjust(8) for b in (*BANDS, "all")))
+    lines.append(f"{'CFAR detections on moving cars':28s}" + "".join(f"{det[b]['on_moving_cars']:8d}" for b in (*BANDS, "all")))
+    lines.append(f"{'CFAR detections, static':28s}" + "".join(f"{det[b]['static']:8d}" for b in (*BANDS, "all")))
     return "\n".join(lines)
