@@ -90,3 +90,30 @@ def test_a_label_moved_behind_the_ego_is_counted_out_of_view(tiny_root, monkeypa
     assert moved_scenes
     assert report["labels_behind_ego"] == len(moved_scenes)
     assert report["labels_in_radar_fov"]["in_view"] == report["labels_in_radar_fov"]["labels"] - len(moved_scenes)
+
+
+def test_optional_label_fields_are_valid_and_pass_through_to_ground_truth(tiny_root):
+    from zendar_dataset.format.ground_truth import ground_truth_frames
+    from zendar_dataset.format.validate import validate_dataset
+
+    assert [p for p in validate_dataset(tiny_root) if "labels" in p or "calibration" in p] == []
+    cars = [car for frame in ground_truth_frames(tiny_root, "train").values() for car in frame]
+    assert cars
+    for car in cars:
+        assert isinstance(car["num_radar_scatterers"], int) and car["num_radar_scatterers"] >= 3
+        assert isinstance(car["num_lidar_points"], int) and car["num_lidar_points"] >= 0
+
+
+def test_a_field_of_view_out_of_range_is_named_in_the_calibration_error(tiny_root):
+    from zendar_dataset.errors import ZendarFormatError
+    from zendar_dataset.format.calibration import Calibration
+
+    index = open_dataset(tiny_root)
+    with index.open_scene(index.scene_ids()[0]) as scene:
+        document = scene.calibration.to_json()
+    assert document["sensors"]["front_left"]["fov_azimuth_deg"] == 120.0
+    document["sensors"]["front_left"]["fov_azimuth_deg"] = 0.0
+    with pytest.raises(ZendarFormatError, match=r"front_left\.fov_azimuth_deg: expected a number in \(0, 360\]"):
+        Calibration.from_json(document)
+    del document["sensors"]["front_left"]["fov_azimuth_deg"]
+    assert Calibration.from_json(document).radar("front_left").fov_azimuth_deg is None
