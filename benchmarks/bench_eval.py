@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import shutil
 import subprocess
 import sys
@@ -184,17 +183,27 @@ class _RecordingNumpy:
         return np.cumsum(values, *args, **kwargs)
 
 
-def wait_rss(command: list[str]) -> tuple[float, int, int]:
-    """Run ``command``; (wall seconds, peak RSS in bytes, exit status)."""
+# Runs the command as its child and prints the child's peak RSS. A process forked from this
+# (large) one starts with this one's high-water mark, which exec keeps; a small launcher's child does not.
+LAUNCHER = """
+import resource, subprocess, sys
+code = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL).returncode
+print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, code)
+"""
+
+
+def wait_rss(command: list[str]) -> tuple[float, int]:
+    """Run ``command``; (wall seconds, its peak RSS in bytes)."""
     start = time.perf_counter()
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
+    done = subprocess.run([sys.executable, "-c", LAUNCHER, *command], capture_output=True, text=True)
     seconds = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    if process.returncode != 0:
-        raise RuntimeError(f"{' '.join(command)} failed ({process.returncode}): {process.stderr.read().decode()[-2000:]}")
-    process.stderr.close()
-    return seconds, usage.ru_maxrss * 1024, process.returncode
+    try:
+        maxrss_kib, code = (int(v) for v in done.stdout.split()[-2:])
+    except ValueError:
+        code = -1
+    if done.returncode != 0 or code != 0:
+        raise RuntimeError(f"{' '.join(command)} failed: {done.stderr[-2000:]}")
+    return seconds, maxrss_kib * 1024
 
 
 def cli_command(pred_path: Path, gt_path: Path, out: Path) -> list[str]:
@@ -271,7 +280,7 @@ def memory_rows(n_frames: int, per_frame: int, workdir: Path) -> None:
         gt_path.write_bytes(orjson.dumps(ground_truth))
         del ground_truth, predictions
         size_mb = (pred_path.stat().st_size + gt_path.stat().st_size) / 1e6
-        seconds, rss, _ = wait_rss(cli_command(pred_path, gt_path, workdir / f"mem-out-{frames}"))
+        seconds, rss = wait_rss(cli_command(pred_path, gt_path, workdir / f"mem-out-{frames}"))
         n = frames * per_frame
         slope = f"{(rss - previous[1]) / (n - previous[0]):>34.0f}" if previous else f"{'-':>34}"
         print(f"{n:>12,} {size_mb:>8.0f} {seconds:>7.2f} {rss / 1e6:>12.0f} {slope}")
