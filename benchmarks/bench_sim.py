@@ -136,7 +136,7 @@ def bench_crossover(scene_counts: list[int], repeats: int) -> None:
     """``tiny`` scenes, ``jobs=1`` against the usable CPUs, interleaved: where workers start to pay off."""
     cpus = usable_cpus()
     print(f"\ntiny profile, jobs 1 vs {cpus} by number of scenes ({repeats} interleaved runs each; "
-          f"'zendar-data synth' picks jobs {default_jobs('tiny', 3)} for the default 3)")
+          f"'zendar-data synth' picks jobs {default_jobs(3)} for the default 3)")
     print(f"{'scenes':>7} {'jobs 1 s':>22} {f'jobs {cpus} s':>22} {'speed-up':>9}")
     for scenes in scene_counts:
         def run(jobs: int) -> None:

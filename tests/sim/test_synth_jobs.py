@@ -8,27 +8,27 @@ from zendar_dataset.sim import generate
 
 
 @pytest.mark.parametrize(
-    ("cpus", "profile", "scenes", "expected"),
+    ("cpus", "scenes", "expected"),
     [
-        (2, "tiny", 3, 1),  # seconds-long scenes: spawning workers costs more than it saves
-        (2, "tiny", 40, 1),
-        (2, "demo", 5, 2),  # 5 scenes >= 2 x 2 workers
-        (2, "demo", 3, 1),  # a second round would leave a worker idle most of the run
-        (2, "paper", 27, 2),
-        (8, "demo", 5, 1),
-        (8, "paper", 27, 8),
-        (1, "demo", 5, 1),
+        (2, 3, 1),  # tiny's default: spawning 2 workers cost more than it saved
+        (2, 4, 2),
+        (2, 5, 2),  # demo's default
+        (2, 12, 2),
+        (8, 5, 1),
+        (8, 16, 8),
+        (1, 5, 1),
     ],
 )
-def test_default_jobs(monkeypatch, cpus, profile, scenes, expected):
+def test_default_jobs(monkeypatch, cpus, scenes, expected):
     monkeypatch.setattr(generate, "usable_cpus", lambda: cpus)
-    assert default_jobs(profile, scenes) == expected
+    assert default_jobs(scenes) == expected
 
 
 @pytest.mark.parametrize(
     ("argv", "expected"),
     [
         (["--profile", "tiny"], 1),
+        (["--profile", "tiny", "--scenes", "12"], 2),
         (["--profile", "demo"], 2),
         (["--profile", "demo", "--scenes", "3"], 1),
         (["--profile", "tiny", "--jobs", "2"], 2),  # an explicit --jobs is kept

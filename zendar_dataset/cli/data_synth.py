@@ -19,23 +19,21 @@ def _ratios(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-def default_jobs(profile: str, n_scenes: int) -> int:
-    """Worker processes ``synth`` uses without ``--jobs``: the usable CPUs, or 1 where workers
-    cannot pay off.
+def default_jobs(n_scenes: int) -> int:
+    """Worker processes ``synth`` uses without ``--jobs``: the usable CPUs, or 1 for fewer
+    scenes than twice the CPUs, where workers cannot pay off.
 
     A spawned worker costs seconds before its first scene (interpreter, imports, compiled
-    kernels loaded), and scenes are handed out whole, so the last round leaves CPUs idle. On
-    the 2-core reference machine (``benchmarks/bench_sim.py``) a ``tiny`` scene takes about a
-    second and its 3-scene dataset was slower with 2 workers than in one process (idle: 5.5-6.3 s
-    against 4.7 s; under a load average of 10: 59 s against 39 s); a ``demo`` dataset (5 scenes of
-    about 30 s) took 1 min 33 s against 2 min 34 s.
+    kernels loaded), and scenes are handed out whole, so with few scenes per worker the last
+    round leaves CPUs idle. Measured on the 2-core reference machine (``benchmarks/bench_sim.py``):
+    3 ``tiny`` scenes took 4.7 s in one process against 5.5-6.3 s with 2 workers (idle), 39 s
+    against 59 s (load average 10); 12 ``tiny`` scenes 59 s against 38 s (load average 5); the
+    5 ``demo`` scenes 2 min 34 s against 1 min 33 s.
     """
     from zendar_dataset.sim.generate import usable_cpus
 
     cpus = usable_cpus()
-    if profile == "tiny" or n_scenes < 2 * cpus:
-        return 1
-    return cpus
+    return 1 if n_scenes < 2 * cpus else cpus
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,8 +53,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")
     parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
                         help="worker processes, one scene each at a time (default: the usable CPUs, at most the "
-                        "scenes left, but 1 for the tiny profile or fewer scenes than twice the CPUs, where "
-                        "workers cost more than they save; 1 = in this process); the output does not depend on it")
+                        "scenes left, but 1 for fewer scenes than twice the CPUs, where workers cost more than "
+                        "they save; 1 = in this process); the output does not depend on it")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 
@@ -80,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
             backend=args.backend,
             progress=not args.quiet,
             withhold_test_labels=args.withhold_test_labels,
-            jobs=default_jobs(args.profile, n_scenes) if args.jobs is None else args.jobs,
+            jobs=default_jobs(n_scenes) if args.jobs is None else args.jobs,
         )
     print(f"wrote {out}")
     return 0
