@@ -74,3 +74,24 @@ def test_dataset_writer_refuses_existing_dataset(tmp_path):
     with pytest.raises(FileExistsError):
         DatasetWriter(tmp_path, "t")
     DatasetWriter(tmp_path, "t", overwrite=True).finalize({})
+
+
+@pytest.mark.parametrize("failing_call", [1, 2])
+def test_an_interrupt_while_the_writer_starts_leaves_no_temporary(tmp_path, backend, monkeypatch, failing_call):
+    # Ctrl-C (or a full disk) can land before any ``with`` block owns the temporary store.
+    from zendar_dataset.format import stores
+
+    real_write_attrs = stores.write_attrs
+    calls = []
+
+    def write_attrs(node, attrs):
+        calls.append(attrs)
+        if len(calls) == failing_call:
+            raise KeyboardInterrupt
+        return real_write_attrs(node, attrs)
+
+    monkeypatch.setattr(stores, "write_attrs", write_attrs)
+    suffix = ".zarr" if backend == "zarr" else ".h5"
+    with pytest.raises(KeyboardInterrupt):
+        SceneWriter(tmp_path / f"x{suffix}", "x", enu_origin=ENU_ORIGIN, calibration=make_calibration(), backend=backend)
+    assert list(tmp_path.iterdir()) == []

@@ -154,18 +154,26 @@ class SceneWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         temporary.remove_stale_temporaries(self.path.parent, self.path.name)  # left by a killed writer
         self._temp_path = temporary.temporary_sibling(self.path)
-        self._store = stores.create_store(self._temp_path, self.backend)
-        root = self._store.root
-        stores.write_attrs(
-            root,
-            {
-                "scene_id": self.scene_id,
-                "time_reference": TIME_REFERENCE,
-                "enu_origin": self.enu_origin,
-                checksums.ROOT_ATTR: checksums.ALGORITHM,
-            },
-        )
-        stores.write_attrs(root.require_group(CALIBRATION_GROUP), {CALIBRATION_ATTR: self.calibration.to_json()})
+        try:
+            self._store = stores.create_store(self._temp_path, self.backend)
+            root = self._store.root
+            stores.write_attrs(
+                root,
+                {
+                    "scene_id": self.scene_id,
+                    "time_reference": TIME_REFERENCE,
+                    "enu_origin": self.enu_origin,
+                    checksums.ROOT_ATTR: checksums.ALGORITHM,
+                },
+            )
+            stores.write_attrs(root.require_group(CALIBRATION_GROUP), {CALIBRATION_ATTR: self.calibration.to_json()})
+        except BaseException:
+            # No ``with`` block owns the store yet (a full disk, Ctrl-C): discard it here.
+            if hasattr(self, "_store"):
+                self.abort()
+            else:
+                temporary.remove_temporary(self._temp_path)
+            raise
 
     # -- context manager -------------------------------------------------
     def __enter__(self) -> "SceneWriter":
