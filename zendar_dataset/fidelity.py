@@ -9,7 +9,7 @@ evaluator (near [0, 15), mid [15, 30), far [30, 60) m of r = sqrt(x² + y²) in 
   :func:`zendar_dataset.sim.scene.build_scene`): the moving cars an annotator would label from the
   radar data (:func:`zendar_dataset.sim.labels.annotatable_cars`) that carry no label;
 - the share of labelled cars within 60 m whose centre lies inside a SAR image of the frame;
-- the CFAR detections of each radar's nearest cube, split into detections on moving cars (inside a
+- the CFAR detections of each radar's latest cube at or before the frame, split into detections on moving cars (inside a
   car's box grown by :data:`ON_CAR_MARGIN_M`; truth boxes where the truth is known, else labels)
   and static ones, and how well two tests separate them (ROC AUC, ``sklearn.metrics.roc_auc_score``):
   the paper's SAR mask (a detection projecting onto a dark SAR pixel is moving, §2.3) and the plain
@@ -250,10 +250,13 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
                 car_center = np.zeros((0, 2))
                 car_velocity = np.zeros((0, 2))
                 car_length = car_width = car_yaw = np.zeros(0)
-        # CFAR on each radar's nearest cube; points moved into this frame's ego frame.
+        # CFAR on each radar's latest cube at or before the frame (the loader's rule, so the AP is the
+        # example's); points moved into this frame's ego frame.
         frame_points, frame_snr, label_hit = [], [], np.zeros(rows.size, bool)
         for radar in radars:
-            k = int(np.argmin(np.abs(radar_times[radar] - stamp)))
+            k = int(np.searchsorted(radar_times[radar], stamp, side="right")) - 1
+            if k < 0:
+                continue
             cube_ns = int(radar_times[radar][k])
             found = radar_points(np.asarray(cubes[radar][k]), cube_ns, calibration.sensors[radar], poses)
             points = poses.ecef_to_ego(poses.ego_to_ecef(found.points_ego, cube_ns), stamp)
