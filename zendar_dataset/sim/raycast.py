@@ -20,6 +20,36 @@ GROUND = -1
 NOTHING = -2
 
 
+@numba.njit(cache=True, inline="always")
+def _slab(ox, oy, oz, dx, dy, dz, c, s, half_size):  # pragma: no cover - compiled
+    """The line ``o + t·d`` (box-centred ENU) against one box of yaw (cos c, sin s), half sizes ``half_size``.
+
+    Returns ``(t_near, t_far, axis, sign)``: the parameter interval inside the box (empty when
+    ``t_near > t_far``), the box axis of the entry face and its outward sign.
+    """
+    # Into the box frame (rotate by -yaw).
+    lox, loy = c * ox + s * oy, -s * ox + c * oy
+    ldx, ldy = c * dx + s * dy, -s * dx + c * dy
+    t_near, t_far, axis, sign = -np.inf, np.inf, -1, 0.0
+    for k in range(3):
+        o = lox if k == 0 else (loy if k == 1 else oz)
+        d = ldx if k == 0 else (ldy if k == 1 else dz)
+        h = half_size[k]
+        if abs(d) < 1e-12:
+            if o < -h or o > h:
+                return np.inf, -np.inf, -1, 0.0
+            continue
+        t1, t2 = (-h - o) / d, (h - o) / d
+        face = -1.0
+        if t1 > t2:
+            t1, t2, face = t2, t1, 1.0
+        if t1 > t_near:
+            t_near, axis, sign = t1, k, face
+        if t2 < t_far:
+            t_far = t2
+    return t_near, t_far, axis, sign
+
+
 @numba.njit(cache=True)
 def _cast(origin, directions, centers, half_sizes, cos_yaw, sin_yaw, max_range):  # pragma: no cover - compiled
     n_rays = directions.shape[0]
@@ -37,30 +67,11 @@ def _cast(origin, directions, centers, half_sizes, cos_yaw, sin_yaw, max_range):
                 best, best_box, nx, ny, nz = t, -1, 0.0, 0.0, 1.0
         for b in range(centers.shape[0]):
             c, s = cos_yaw[b], sin_yaw[b]
-            ox, oy, oz = origin[0] - centers[b, 0], origin[1] - centers[b, 1], origin[2] - centers[b, 2]
-            # Into the box frame (rotate by -yaw).
-            lox, loy = c * ox + s * oy, -s * ox + c * oy
-            ldx, ldy = c * dx + s * dy, -s * dx + c * dy
-            t_near, t_far, axis, sign = -np.inf, np.inf, -1, 0.0
-            ok = True
-            for k in range(3):
-                o = lox if k == 0 else (loy if k == 1 else oz)
-                d = ldx if k == 0 else (ldy if k == 1 else dz)
-                h = half_sizes[b, k]
-                if abs(d) < 1e-12:
-                    if o < -h or o > h:
-                        ok = False
-                        break
-                    continue
-                t1, t2 = (-h - o) / d, (h - o) / d
-                face = -1.0
-                if t1 > t2:
-                    t1, t2, face = t2, t1, 1.0
-                if t1 > t_near:
-                    t_near, axis, sign = t1, k, face
-                if t2 < t_far:
-                    t_far = t2
-            if not ok or t_near > t_far or t_near <= 0.0 or t_near >= best:
+            t_near, t_far, axis, sign = _slab(
+                origin[0] - centers[b, 0], origin[1] - centers[b, 1], origin[2] - centers[b, 2],
+                dx, dy, dz, c, s, half_sizes[b],
+            )
+            if t_near > t_far or t_near <= 0.0 or t_near >= best:
                 continue
             best, best_box = t_near, b
             lx = sign if axis == 0 else 0.0
@@ -135,26 +146,11 @@ def _clear(origin, points, owner, centers, half_sizes, cos_yaw, sin_yaw, toleran
         for b in range(centers.shape[0]):
             if b == owner[p]:
                 continue
-            c, s = cos_yaw[b], sin_yaw[b]
-            ox, oy, oz = origin[0] - centers[b, 0], origin[1] - centers[b, 1], origin[2] - centers[b, 2]
-            lox, loy = c * ox + s * oy, -s * ox + c * oy
-            ldx, ldy = c * dx + s * dy, -s * dx + c * dy
-            t_near, t_far = 0.0, length - tolerance
-            for k in range(3):
-                o = lox if k == 0 else (loy if k == 1 else oz)
-                d = ldx if k == 0 else (ldy if k == 1 else dz)
-                h = half_sizes[b, k]
-                if abs(d) < 1e-12:
-                    if o < -h or o > h:
-                        t_near, t_far = 1.0, 0.0
-                        break
-                    continue
-                t1, t2 = (-h - o) / d, (h - o) / d
-                if t1 > t2:
-                    t1, t2 = t2, t1
-                t_near = max(t_near, t1)
-                t_far = min(t_far, t2)
-            if t_near < t_far:
+            t_near, t_far, _, _ = _slab(
+                origin[0] - centers[b, 0], origin[1] - centers[b, 1], origin[2] - centers[b, 2],
+                dx, dy, dz, cos_yaw[b], sin_yaw[b], half_sizes[b],
+            )
+            if max(t_near, 0.0) < min(t_far, length - tolerance):
                 clear[p] = False
                 break
     return clear
