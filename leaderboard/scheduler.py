@@ -82,18 +82,24 @@ class _Scorer:
         )
         self.answers: queue.Queue = queue.Queue()
         threading.Thread(target=self._read, daemon=True).start()
-        ready = self.answer(STARTUP_LIMIT_S)
-        if not ready.get("ready"):
-            self.kill()
-            raise ScorerFailed("the scorer did not start")
-        if ready.get("gt_sha256") != settings.gt_sha256:
-            self.kill()
-            raise ScorerFailed("the scorer read other labels than the server (the ground truth changed on disk)")
+        try:
+            ready = self.answer(STARTUP_LIMIT_S)
+            if not ready.get("ready"):
+                raise ScorerFailed("the scorer did not start")
+            if ready.get("gt_sha256") != settings.gt_sha256:
+                raise ScorerFailed("the scorer read other labels than the server (the ground truth changed on disk)")
+        except BaseException:
+            self.kill()  # slow to start or wrong: never leave it running beside its replacement
+            raise
 
     def _read(self) -> None:
-        for line in self.process.stdout:
-            self.answers.put(orjson.loads(line))
-        self.answers.put(None)  # end of output: the process died
+        try:
+            for line in self.process.stdout:
+                self.answers.put(orjson.loads(line))
+        except orjson.JSONDecodeError:
+            pass  # a line cut short by the scorer's death: the end of its output
+        finally:
+            self.answers.put(None)  # end of output: the process died
 
     def answer(self, timeout_s: float) -> dict:
         try:

@@ -33,6 +33,11 @@ from zendar_leaderboard.scoring import BANDS
 from zendar_leaderboard.store import QuotaExceeded, RoundClosed, Store, Team
 from zendar_leaderboard.submission import check_submission
 
+# ASCII digits only: str.isdigit() also accepts '²', which int() then refuses.
+_CONTENT_LENGTH = re.compile(r"[0-9]{1,15}")
+#: How long an upload waits for a checking slot before the server answers 503.
+UPLOAD_SLOT_WAIT_S = 30.0
+
 log = logging.getLogger("zendar_leaderboard")
 
 #: At most this many problems are listed in a 422 answer, each at most PROBLEM_CHARS long.
@@ -139,7 +144,7 @@ class Handler(BaseHTTPRequestHandler):
         if declared is None:
             self._error(HTTPStatus.LENGTH_REQUIRED, "a Content-Length header is required")
             return None, None
-        if not declared.strip().isdigit():
+        if not _CONTENT_LENGTH.fullmatch(declared.strip()):
             self._error(HTTPStatus.BAD_REQUEST, "Content-Length must be a number of bytes")
             return None, None
         length = int(declared)
@@ -183,14 +188,21 @@ class Handler(BaseHTTPRequestHandler):
         team, length = self._upload_refusal()
         if team is None:
             return
-        body = self.rfile.read(length)
-        if len(body) != length:
-            self._error(HTTPStatus.BAD_REQUEST, f"the body ended after {len(body):,} of {length:,} bytes")
+        # A slot is taken before the body is read: uploads held in memory at once are bounded by the
+        # slots, not by how many connections a client opens.
+        if not self.settings.check_slots.acquire(timeout=UPLOAD_SLOT_WAIT_S):
+            self._error(HTTPStatus.SERVICE_UNAVAILABLE, "the server is busy checking other uploads; try again shortly")
             return
-        with self.settings.check_slots:
+        try:
+            body = self.rfile.read(length)
+            if len(body) != length:
+                self._error(HTTPStatus.BAD_REQUEST, f"the body ended after {len(body):,} of {length:,} bytes")
+                return
             checked = check_submission(body, self.settings.gt_frame_ids)
             if checked.ok:
                 checked.document = None  # only the bytes are kept
+        finally:
+            self.settings.check_slots.release()
         if not checked.ok:
             n = len(checked.problems)
             self._error(

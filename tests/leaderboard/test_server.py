@@ -55,6 +55,9 @@ def test_a_body_over_the_limit_is_refused_before_it_is_read(board):
     # No length at all: 411.
     answer = raw_exchange(board.url, head.replace(b"Content-Length: 10000000000\r\n", b""))
     assert answer.startswith(b"HTTP/1.0 411")
+    # A length that str.isdigit() accepts but int() does not (latin-1 '\xb2' is a superscript two): 400.
+    answer = raw_exchange(board.url, head.replace(b"Content-Length: 10000000000", b"Content-Length: \xb2"))
+    assert answer.startswith(b"HTTP/1.0 400") and b"Content-Length" in answer
     assert board.store.submissions_in_window(board.store.team_for_token(token).id) == 0
 
 
