@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import zlib
 import math
 import struct
 from fractions import Fraction
@@ -101,6 +102,23 @@ def test_truncated_gzip_is_reported_not_crashed(tmp_path):
         ReleaseStream(path)
     with ReleaseStream(path, skip_corrupt=True) as stream:
         assert 1 <= len(list(stream)) < 5
+        assert stream.losses
+
+
+def test_gzip_truncated_on_a_record_boundary_is_reported(tmp_path):
+    # A recorder killed after a flush: the decompressed bytes hold whole records only.
+    records = [_image_2020(k) for k in range(4)]
+    whole = enc.stream_bytes(records, header=False)
+    first_two = enc.stream_bytes(records[:2], header=False)
+    compressor = zlib.compressobj(9, zlib.DEFLATED, 31)  # gzip container
+    truncated = compressor.compress(first_two) + compressor.flush(zlib.Z_SYNC_FLUSH)
+    assert len(truncated) < len(gzip.compress(whole))
+    path = tmp_path / "stream.pbs"
+    path.write_bytes(truncated)  # no gzip trailer: the compressed stream stops after the two records
+    with pytest.raises(ZendarFormatError, match="gzip stream ends early"):
+        ReleaseStream(path)
+    with ReleaseStream(path, skip_corrupt=True) as stream:
+        assert len(list(stream)) == 2
         assert stream.losses
 
 

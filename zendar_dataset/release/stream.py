@@ -297,7 +297,13 @@ class ReleaseStream:
     def _records(self, chain: _Chain) -> tuple[list[int], list[int]]:
         offsets, lengths = list(chain.offsets), list(chain.lengths)
         if self._gzip_truncated is not None and chain.tiles:
-            chain.problem = "the gzip stream is truncated"
+            # The stream stopped on a record boundary: every record read is whole, but what followed
+            # in the compressed stream is lost, and how much is unknown.
+            self.report_problem(
+                len(self._data), 0,
+                f"truncated: the gzip stream ends early (after {self._gzip_truncated} compressed bytes), "
+                "on a record boundary; the records before it are whole",
+            )
         while not chain.tiles:
             reason = chain.problem or "corrupt"
             if self._gzip_truncated is not None:
