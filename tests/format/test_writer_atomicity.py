@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import pathlib
 
 import numpy as np
 import pytest
@@ -95,3 +97,27 @@ def test_an_interrupt_while_the_writer_starts_leaves_no_temporary(tmp_path, back
     with pytest.raises(KeyboardInterrupt):
         SceneWriter(tmp_path / f"x{suffix}", "x", enu_origin=ENU_ORIGIN, calibration=make_calibration(), backend=backend)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_while_an_old_scene_is_swapped_out_keeps_the_old_scene(tmp_path, monkeypatch):
+    # A zarr scene is a directory: the old one is moved aside before the new one is renamed in.
+    path = tmp_path / "x.zarr"
+    with SceneWriter(path, "x", enu_origin=ENU_ORIGIN, calibration=make_calibration()) as writer:
+        writer.append_radar("left", T0_NS, np.full((R, D, A), 1, np.complex64))
+    real_replace = os.replace
+    renames_onto_the_scene = []
+
+    def replace(src, dst):
+        if pathlib.Path(dst) == path:
+            renames_onto_the_scene.append(src)
+            if len(renames_onto_the_scene) == 1:  # the new scene's rename: Ctrl-C lands here
+                raise KeyboardInterrupt
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with SceneWriter(path, "x", enu_origin=ENU_ORIGIN, calibration=make_calibration(), overwrite=True) as writer:
+            writer.append_radar("left", T0_NS, np.full((R, D, A), 2, np.complex64))
+    monkeypatch.undo()
+    assert SceneReader(path).array("radar/left/cube")[0][0, 0, 0] == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]

@@ -524,10 +524,20 @@ class SceneWriter:
         if self.path.exists():
             if not self.overwrite:
                 raise FileExistsError(f"{self.path}: a scene appeared while writing (pass overwrite=True to replace it)")
-            trash = temporary.temporary_sibling(self.path)
-            os.replace(self.path, trash)
-            os.replace(self._temp_path, self.path)
-            temporary.remove_temporary(trash)
+            if not self.path.is_dir():
+                os.replace(self._temp_path, self.path)  # a file (HDF5) is replaced atomically
+            else:
+                # A directory cannot be renamed over a non-empty one: move the old scene aside first,
+                # and put it back if the new one does not arrive (a failure or Ctrl-C in between).
+                trash = temporary.temporary_sibling(self.path)
+                try:
+                    os.replace(self.path, trash)
+                    os.replace(self._temp_path, self.path)
+                except BaseException:
+                    if trash.exists() and not self.path.exists():
+                        os.replace(trash, self.path)
+                    raise
+                temporary.remove_temporary(trash)
         else:
             os.replace(self._temp_path, self.path)
         temporary.forget(self._temp_path)
