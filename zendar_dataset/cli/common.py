@@ -31,8 +31,9 @@ EXIT_USAGE = 2
 #: At most this many problems are printed; the rest are counted (and written to a file where a command can).
 MAX_PROBLEMS_SHOWN = 50
 
-# OS errors that say the environment refused a write, whichever file they name.
-_WRITE_FAILURES = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EIO})
+# OS errors that say the environment refused a write, whichever file they name (not EIO: a bad
+# sector in an input is not a failure to write the output).
+_WRITE_FAILURES = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG})
 
 
 class OutputError(Exception):

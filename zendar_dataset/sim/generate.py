@@ -389,13 +389,14 @@ def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, thread
 
 def _terminate(executor: ProcessPoolExecutor) -> None:
     """Stop ``executor``'s workers now, without waiting for their scenes."""
-    terminate_workers = getattr(executor, "terminate_workers", None)
-    if terminate_workers is not None:  # Python >= 3.14
-        terminate_workers()
-        return
-    # Before 3.14 the executor has no public way to stop running workers: use its process table.
-    for process in list((executor._processes or {}).values()):
+    # The executor has no public way before 3.14 to stop running workers, and 3.14's
+    # ``terminate_workers`` does not wait for them; the caller then removes the workers' temporaries,
+    # which counts only as stale once their processes are gone: terminate and join through the table.
+    processes = list((executor._processes or {}).values())
+    for process in processes:
         process.terminate()
+    for process in processes:
+        process.join()
     executor.shutdown(wait=True, cancel_futures=True)
 
 
