@@ -121,3 +121,11 @@ def test_an_interrupt_while_an_old_scene_is_swapped_out_keeps_the_old_scene(tmp_
     monkeypatch.undo()
     assert SceneReader(path).array("radar/left/cube")[0][0, 0, 0] == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+@pytest.mark.parametrize("array", [np.float64(3.0), np.zeros((5, 0))], ids=["scalar", "empty-trailing-axis"])
+def test_an_extra_array_without_rows_is_refused_by_name(tmp_path, backend, array):
+    suffix = ".zarr" if backend == "zarr" else ".h5"
+    with SceneWriter(tmp_path / f"x{suffix}", "x", enu_origin=ENU_ORIGIN, calibration=make_calibration()) as writer:
+        with pytest.raises(ZendarFormatError, match=r"x/lidar/top/extra: expected an array of rows"):
+            writer.write_extra_array("lidar/top/extra", array)

@@ -449,6 +449,11 @@ class SceneWriter:
         (e.g. ``lidar/<lidar>/position_ecef``; docs/format.md); written whole, checksummed."""
         if self._closed:
             raise RuntimeError(f"{self.scene_id}: the writer is closed")
+        array = np.asarray(array)
+        if array.ndim == 0 or 0 in array.shape[1:]:
+            raise ZendarFormatError(
+                f"{self.scene_id}/{path}: expected an array of rows with non-empty trailing axes, got shape {array.shape}"
+            )
         self._write_small(path, np.ascontiguousarray(array))
 
     def write_attrs(self, path: str, attrs: dict[str, Any]) -> None:
