@@ -162,7 +162,11 @@ def open_store(
     if is_url(location):
         fs, fs_path = fsspec.core.url_to_fs(str(location), **(storage_options or {}))
         file_object = fs.open(fs_path, "rb")
-        handle = h5py.File(file_object, "r")
+        try:
+            handle = h5py.File(file_object, "r")
+        except BaseException:
+            file_object.close()  # not an HDF5 file (or interrupted): nothing else will close it
+            raise
         return OpenStore(backend, handle, [file_object.close, handle.close])
     handle = h5py.File(local_path(location), "r")
     return OpenStore(backend, handle, [handle.close])
