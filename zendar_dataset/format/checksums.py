@@ -87,3 +87,17 @@ def decode(text: Any, n_chunks: int) -> list[int]:
 def linear_index(coords: tuple[int, ...], grid: tuple[int, ...]) -> int:
     """Position of chunk ``coords`` in C order of a chunk grid."""
     return int(np.ravel_multi_index(coords, grid)) if grid else 0
+
+
+def array_chunk_checksums(
+    block: np.ndarray, start_row: int, chunks: tuple[int, ...], grid: tuple[int, ...]
+) -> Iterator[tuple[tuple[int, ...], int, int]]:
+    """``(coordinates in the whole array's grid, linear index, CRC-32C)`` of each chunk of ``block``.
+
+    ``block`` holds rows from ``start_row`` (a chunk boundary) with every other axis whole; the
+    validator, the verifying reader and convert all compare these against the recorded list.
+    """
+    for coords, values in iter_block_chunks(block, chunks):
+        if coords:
+            coords = (coords[0] + start_row // chunks[0], *coords[1:])
+        yield coords, linear_index(coords, grid), crc32c(values)

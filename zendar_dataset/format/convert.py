@@ -75,10 +75,8 @@ def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bo
         for start in range(0, shape[0], step):
             block = np.asarray(source[start : start + step])
             target[start : start + step] = block
-            for coords, values in checksums.iter_block_chunks(block, chunks):
-                coords = (coords[0] + start // chunks[0], *coords[1:])
-                index = checksums.linear_index(coords, grid)
-                computed.append(checksums.crc32c(values))
+            for coords, index, found in checksums.array_chunk_checksums(block, start, chunks, grid):
+                computed.append(found)
                 if expected is not None and computed[-1] != expected[index]:
                     raise ZendarFormatError(
                         f"{scene}: {path}: chunk {list(coords)}: expected {checksums.ALGORITHM} "

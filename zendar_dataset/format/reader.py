@@ -357,11 +357,7 @@ class StoredArray:
         shape = self.shape
         chunks = self.chunks or shape or (1,)
         grid = checksums.grid_shape(shape, chunks)
-        for coords, values in checksums.iter_block_chunks(block, chunks):
-            if coords:
-                coords = (coords[0] + start // chunks[0], *coords[1:])
-            index = checksums.linear_index(coords, grid)
-            found = checksums.crc32c(values)
+        for coords, index, found in checksums.array_chunk_checksums(block, start, chunks, grid):
             if found != self._crc32c[index]:
                 raise ZendarFormatError(
                     f"{self.scene_id}: {self.path}: chunk {list(coords)}: expected {checksums.ALGORITHM} "

@@ -74,11 +74,8 @@ def _read_all(array: Any, scene: str, path: str, problems: list[str], checksumme
             )
             continue
         if expected is not None:
-            for coords, values in checksums.iter_block_chunks(block, chunks):
-                if coords:
-                    coords = (coords[0] + start // chunks[0], *coords[1:])
-                index = checksums.linear_index(coords, grid)
-                if coords not in missing and checksums.crc32c(values) != expected[index]:
+            for coords, index, found in checksums.array_chunk_checksums(block, start or 0, chunks, grid):
+                if coords not in missing and found != expected[index]:
                     altered.append(coords)
         if keep:
             blocks.append(block)
