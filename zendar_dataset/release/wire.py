@@ -182,6 +182,22 @@ def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = 
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _varint_compiled(data: np.ndarray, pos: int, end: int):  # pragma: no cover - compiled
+    """:func:`read_varint` for the compiled scan: ``(value, next position, complete)``."""
+    value = 0
+    shift = 0
+    while True:
+        if pos >= end or shift > 63:
+            return value, pos, False
+        byte = data[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return value, pos, True
+
+
 @numba.njit(cache=True, nogil=True)
 def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compiled
     """Top-level fields of ``data[start:end]``: number, wire type, value or payload offset, payload length.
@@ -199,17 +215,9 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
     pos = start
     while pos < end:
         tag_at = pos
-        tag = 0
-        shift = 0
-        while True:
-            if pos >= end or shift > 63:
-                return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
-            byte = data[pos]
-            pos += 1
-            tag |= (byte & 0x7F) << shift
-            shift += 7
-            if byte < 0x80:
-                break
+        tag, pos, ok = _varint_compiled(data, pos, end)
+        if not ok:
+            return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
         number = tag >> 3
         wire = tag & 7
         value = 0
@@ -217,16 +225,9 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
         if number == 0:
             return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
         if wire == 0 or wire == 2:
-            shift = 0
-            while True:
-                if pos >= end or shift > 63:
-                    return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
-                byte = data[pos]
-                pos += 1
-                value |= (byte & 0x7F) << shift
-                shift += 7
-                if byte < 0x80:
-                    break
+            value, pos, ok = _varint_compiled(data, pos, end)
+            if not ok:
+                return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
             if wire == 2:
                 length = value
                 value = pos
