@@ -18,7 +18,7 @@ def test_every_package_folder_is_listed_in_pyproject():
         if "__pycache__" not in init.parts
     }
     assert found - listed == set(), "add these packages to [tool.setuptools] packages in pyproject.toml"
-    assert config["package-dir"] == {"zendar_leaderboard": "leaderboard"} and "zendar_leaderboard" in listed
+    assert config["package-dir"]["zendar_leaderboard"] == "leaderboard" and "zendar_leaderboard" in listed
     assert "leaderboard" not in listed
 
 
