@@ -1,0 +1,134 @@
+"""The pictures a researcher looks at first: precision-recall per band with every method on one
+plot, and a bird's-eye view of a test frame (SAR image, ground truth, each method's detections).
+
+matplotlib on the Agg canvas (no display needed); files are written atomically.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Polygon
+
+from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.eval.report import write_atomically
+
+_MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
+
+
+def _save_png(figure: Figure, path: Path) -> Path:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png")
+    write_atomically(path, buffer.getvalue())
+    return path
+
+
+def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) -> Figure:
+    """Precision envelopes of several methods in one band.
+
+    Parameters
+    ----------
+    curves
+        ``(label, metrics)`` per method, ``metrics`` as returned by ``zendar_dataset.eval.evaluate``.
+    band
+        A key of ``BANDS_M``.
+    """
+    low_m, high_m = BANDS_M[band]
+    figure = Figure(figsize=(6.4, 5.6), dpi=100, layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    for index, (label, metrics) in enumerate(curves):
+        curve, ap = metrics["pr_curves"][band], metrics["ap"][band]
+        text = f"{label} (AP n/a)" if ap is None else f"{label} (AP {100 * ap:.1f})"
+        if not curve["recall"]:
+            axes.plot([], [], label=text + ", no detections")
+            continue
+        recall = [0.0] + curve["recall"]
+        envelope = curve["precision_envelope"][:1] + curve["precision_envelope"]
+        axes.step(recall, envelope, where="pre", label=text, marker=_MARKERS[index % len(_MARKERS)],
+                  markevery=max(1, len(recall) // 8), markersize=4)
+    axes.set_xlim(0.0, 1.0)
+    axes.set_ylim(0.0, 1.02)
+    axes.set_xlabel("recall")
+    axes.set_ylabel("precision (envelope)")
+    axes.set_title(f"moving cars, {band} [{low_m:g}, {high_m:g}) m", fontsize=10)
+    axes.grid(alpha=0.3)
+    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False, fontsize=8)
+    return figure
+
+
+def write_pr_comparisons(curves: list[tuple[str, dict[str, Any]]], out_dir: Path) -> list[Path]:
+    """``out_dir/pr_<band>.png`` for every band (see :func:`pr_comparison_figure`)."""
+    return [_save_png(pr_comparison_figure(curves, band), out_dir / f"pr_{band}.png") for band in BANDS_M]
+
+
+def _box_corners(car: dict[str, float]) -> np.ndarray:
+    c, s = np.cos(car["yaw"]), np.sin(car["yaw"])
+    half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [car["length"] / 2, car["width"] / 2]
+    return half @ np.array([[c, s], [-s, c]]) + [car["x"], car["y"]]
+
+
+def bev_figure(
+    sar_layers: list[tuple[np.ndarray, np.ndarray]],
+    ground_truth: list[dict[str, float]],
+    detections: dict[str, list[dict[str, float]]],
+    title: str,
+    extent_m: float = 60.0,
+) -> Figure:
+    """Bird's-eye view of one frame in its ego frame (x forward, y left), metres.
+
+    Parameters
+    ----------
+    sar_layers
+        Per SAR image: ``image_db [H, W]`` (dB over the image's median) and ``xy_ego [H, W, 2]``,
+        the ego-frame position of each pixel centre.
+    ground_truth
+        Labelled cars of the frame: ``x, y, length, width, yaw`` (ego frame, m, rad).
+    detections
+        Method label → its detections ``{"x", "y", "score"}`` in the frame.
+    extent_m
+        Half-width of the view; the evaluator's bands end at 60 m.
+    """
+    figure = Figure(figsize=(8.0, 7.6), dpi=100, layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot()
+    mesh = None
+    for image_db, xy_ego in sar_layers:
+        # Plot y to the left as on a map seen from above: horizontal axis = -y.
+        mesh = axes.pcolormesh(-xy_ego[..., 1], xy_ego[..., 0], image_db, cmap="gray", vmin=-10.0, vmax=30.0,
+                               shading="nearest", rasterized=True)
+    if mesh is not None:
+        figure.colorbar(mesh, ax=axes, label="SAR, dB over the image median", shrink=0.7)
+    for radius in (15.0, 30.0, 60.0):
+        angle = np.linspace(-np.pi, np.pi, 256)
+        axes.plot(radius * np.sin(angle), radius * np.cos(angle), color="0.6", linewidth=0.6, linestyle=":")
+    for index, car in enumerate(ground_truth):
+        corners = _box_corners(car)
+        axes.add_patch(Polygon(np.c_[-corners[:, 1], corners[:, 0]], closed=True, fill=False, edgecolor="lime",
+                               linewidth=1.5, label="ground truth" if index == 0 else None))
+    for index, (label, cars) in enumerate(detections.items()):
+        if not cars:
+            axes.plot([], [], _MARKERS[index % len(_MARKERS)], label=f"{label} (none)")
+            continue
+        xy = np.array([[car["x"], car["y"]] for car in cars])
+        axes.plot(-xy[:, 1], xy[:, 0], _MARKERS[index % len(_MARKERS)], markersize=6, markerfacecolor="none",
+                  markeredgewidth=1.4, label=label)
+    axes.plot([0.0], [0.0], marker=(3, 0, 0), color="red", markersize=10, label="ego")
+    axes.set_xlim(-extent_m, extent_m)
+    axes.set_ylim(-10.0, extent_m)
+    axes.set_aspect("equal")
+    axes.set_xlabel("-y (left of the ego is to the left), m")
+    axes.set_ylabel("x (forward), m")
+    axes.set_title(title, fontsize=10)
+    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, frameon=False, fontsize=8)
+    return figure
+
+
+def write_bev(figure: Figure, path: Path) -> Path:
+    """Write a figure of :func:`bev_figure` as PNG, atomically."""
+    return _save_png(figure, path)

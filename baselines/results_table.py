@@ -1,0 +1,205 @@
+"""Table 1 of the paper from the benchmark's scored rows: ``results.json``, ``table.md``, ``table.csv``.
+
+Pure functions on the evaluator's metrics: a row's AP per band is the mean over its seeds, with the
+standard deviation across seeds and the evaluator's bootstrap interval (over test scenes) of each seed.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+BANDS = ("near", "mid", "far", "all")
+TABLE_BANDS = ("near", "mid", "far")
+
+#: Paper Table 1 (AP in percent on the recorded test set): (method, unsupervised, supervised) -> near, mid, far.
+PAPER_AP_PERCENT: dict[tuple[str, bool, bool], tuple[float, float, float]] = {
+    ("CFAR", False, False): (65.0, 43.0, 13.3),
+    ("FPN ResNet-34", False, True): (66.3, 56.0, 22.8),
+    ("FPN ResNet-34", True, True): (73.1, 63.4, 23.9),
+    ("zoom-out DenseNet-37", False, True): (67.0, 59.8, 28.3),
+    ("zoom-out DenseNet-37", True, True): (77.2, 68.1, 29.2),
+    ("zoom-out DenseNet-67", False, True): (74.8, 58.8, 29.6),
+    ("zoom-out DenseNet-67", True, True): (76.6, 67.6, 29.9),
+}
+
+#: Method names of Table 1 per architecture of ``zendar_baselines.models``.
+METHOD_NAMES = {
+    "cfar": "CFAR",
+    "fpn-resnet34": "FPN ResNet-34",
+    "densenet-37": "zoom-out DenseNet-37",
+    "densenet-67": "zoom-out DenseNet-67",
+}
+
+
+@dataclass
+class Row:
+    """One line of Table 1 and the metrics of each of its seeds.
+
+    Attributes
+    ----------
+    key : str
+        Short, file-system safe name (``"cfar"``, ``"densenet-37-pretrained"``); the row's folder in ``--out``.
+    method : str
+        As the paper writes it (:data:`METHOD_NAMES`).
+    unsupervised, supervised : bool
+        Trained on automatic labels / on manual labels.
+    seed_metrics : list of dict
+        The evaluator's metrics (``zendar_dataset.eval.evaluate``) of each seed, in seed order.
+    """
+
+    key: str
+    method: str
+    unsupervised: bool
+    supervised: bool
+    seed_metrics: list[dict[str, Any]] = field(default_factory=list)
+
+    def ap_mean(self) -> dict[str, float | None]:
+        """Mean AP per band over the seeds (None where a band has no ground truth)."""
+        return {band: _mean([m["ap"][band] for m in self.seed_metrics]) for band in BANDS}
+
+    def ap_std(self) -> dict[str, float | None]:
+        """Sample standard deviation per band over the seeds (None for fewer than 2 seeds)."""
+        return {band: _std([m["ap"][band] for m in self.seed_metrics]) for band in BANDS}
+
+    def paper_ap(self) -> dict[str, float] | None:
+        """The paper's AP for this row as fractions, or None for a row the paper does not have."""
+        figures = PAPER_AP_PERCENT.get((self.method, self.unsupervised, self.supervised))
+        return None if figures is None else {band: round(value / 100.0, 4) for band, value in zip(TABLE_BANDS, figures)}
+
+    def to_json(self) -> dict[str, Any]:
+        """The row's entry of ``results.json``."""
+        entry: dict[str, Any] = {
+            "key": self.key,
+            "method": self.method,
+            "unsupervised": self.unsupervised,
+            "supervised": self.supervised,
+            "ap": _rounded(self.ap_mean()),
+            "n_seeds": len(self.seed_metrics),
+        }
+        if len(self.seed_metrics) > 1:
+            entry["ap_std"] = _rounded(self.ap_std())
+            entry["ap_per_seed"] = [_rounded(m["ap"]) for m in self.seed_metrics]
+        intervals = [m.get("bootstrap") for m in self.seed_metrics]
+        if intervals and all(intervals):
+            entry["ap_ci95_per_seed"] = [
+                {band: [_round(ci[band]["low"]), _round(ci[band]["high"])] for band in BANDS} for ci in intervals
+            ]
+        entry["counts"] = self.seed_metrics[0]["counts"] if self.seed_metrics else None
+        entry["paper_ap"] = self.paper_ap()
+        entry["metrics"] = f"rows/{self.key}/metrics.json"
+        entry["predictions"] = f"rows/{self.key}/predictions.json"
+        return entry
+
+
+def _mean(values: list[float | None]) -> float | None:
+    known = [v for v in values if v is not None]
+    return None if not known or len(known) != len(values) else math.fsum(known) / len(known)
+
+
+def _std(values: list[float | None]) -> float | None:
+    mean = _mean(values)
+    if mean is None or len(values) < 2:
+        return None
+    return math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (len(values) - 1))
+
+
+def _round(value: float | None) -> float | None:
+    return None if value is None else round(float(value), 4)
+
+
+def _rounded(by_band: dict[str, float | None]) -> dict[str, float | None]:
+    return {band: _round(by_band[band]) for band in BANDS}
+
+
+def _cell(mean: float | None, std: float | None) -> str:
+    if mean is None:
+        return "n/a"
+    return f"{100 * mean:.1f}" if std is None else f"{100 * mean:.1f} ± {100 * std:.1f}"
+
+
+def _mark(flag: bool) -> str:
+    return "✓" if flag else "-"
+
+
+def markdown_table(rows: list[Row], title: str) -> str:
+    """Table 1 as Markdown: ours (mean ± std over seeds, percent) beside the paper's figures."""
+    lines = [
+        f"### {title}",
+        "",
+        "| method | unsupervised | supervised | AP near | AP mid | AP far | AP all | paper near | paper mid | paper far |",
+        "|---|:-:|:-:|--:|--:|--:|--:|--:|--:|--:|",
+    ]
+    for row in rows:
+        mean, std = row.ap_mean(), row.ap_std()
+        paper = row.paper_ap()
+        ours = [_cell(mean[band], std[band]) for band in BANDS]
+        theirs = [f"{100 * paper[band]:.1f}" if paper else "" for band in TABLE_BANDS]
+        lines.append(
+            f"| {row.method} | {_mark(row.unsupervised)} | {_mark(row.supervised)} | " + " | ".join(ours + theirs) + " |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def csv_table(rows: list[Row]) -> str:
+    """One line per row: method, flags, mean and std per band (fractions), the paper's figures (fractions)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    header = ["method", "unsupervised", "supervised"]
+    header += [f"ap_{band}" for band in BANDS] + [f"ap_{band}_std" for band in BANDS]
+    header += ["n_seeds"] + [f"paper_ap_{band}" for band in TABLE_BANDS]
+    writer.writerow(header)
+    for row in rows:
+        mean, std = row.ap_mean(), row.ap_std()
+        paper = row.paper_ap() or {}
+        writer.writerow(
+            [row.method, int(row.unsupervised), int(row.supervised)]
+            + ["" if mean[b] is None else f"{mean[b]:.4f}" for b in BANDS]
+            + ["" if std[b] is None else f"{std[b]:.4f}" for b in BANDS]
+            + [len(row.seed_metrics)]
+            + ["" if b not in paper else f"{paper[b]:.3f}" for b in TABLE_BANDS]
+        )
+    return buffer.getvalue()
+
+
+def claims(rows: list[Row]) -> dict[str, dict[str, Any]]:
+    """The three findings of Table 1, each checked on our rows (mean AP per band).
+
+    - ``cnn_beats_cfar``: every CNN row above CFAR in every band;
+    - ``pretraining_helps``: per architecture, pretrain → fine-tune above supervised-only in every band;
+    - ``ap_falls_with_range``: every row near > mid > far.
+
+    Each entry holds ``holds`` (bool, or None where a band lacks ground truth) and ``failures``
+    (one readable line per comparison that does not hold).
+    """
+    by_key = {(row.method, row.unsupervised, row.supervised): row.ap_mean() for row in rows}
+    cfar = by_key.get(("CFAR", False, False))
+    out: dict[str, dict[str, Any]] = {}
+
+    def verdict(comparisons: list[tuple[str, float | None, float | None]]) -> dict[str, Any]:
+        unknown = [text for text, a, b in comparisons if a is None or b is None]
+        failures = [f"{text}: {100 * a:.1f} <= {100 * b:.1f}" for text, a, b in comparisons
+                    if a is not None and b is not None and not a > b]
+        return {"holds": None if unknown and not failures else not failures, "failures": failures, "unknown": unknown}
+
+    cnn_rows = [row for row in rows if row.method != "CFAR"]
+    out["cnn_beats_cfar"] = verdict([
+        (f"{row.method} ({'pretrained' if row.unsupervised else 'supervised only'}) vs CFAR, {band}",
+         row.ap_mean()[band], None if cfar is None else cfar[band])
+        for row in cnn_rows for band in TABLE_BANDS
+    ])
+    out["pretraining_helps"] = verdict([
+        (f"{method} pretrained vs supervised only, {band}", by_key[(method, True, True)][band],
+         by_key[(method, False, True)][band])
+        for method in dict.fromkeys(row.method for row in cnn_rows)
+        if (method, True, True) in by_key and (method, False, True) in by_key
+        for band in TABLE_BANDS
+    ])
+    out["ap_falls_with_range"] = verdict([
+        (f"{row.method}{' pretrained' if row.unsupervised else ''}: {a} vs {b}", row.ap_mean()[a], row.ap_mean()[b])
+        for row in rows for a, b in (("near", "mid"), ("mid", "far"))
+    ])
+    return out
