@@ -1,0 +1,67 @@
+"""Content hashes that tie a baseline's stored result to what it was made from.
+
+A dataset is identified by the SHA-256 of its ``dataset.json`` bytes: the file lists every scene and
+the train / val / test splits, so two roots with the same fingerprint split the same scenes the same
+way (the scene stores themselves carry their own chunk checksums). Small JSON records are hashed in
+canonical form (sorted keys, no whitespace) so that reformatting a file does not change its hash.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from typing import Any
+
+import fsspec
+
+from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.format import stores
+from zendar_dataset.format.reader import DatasetIndex, open_dataset
+from zendar_dataset.format.schema import DATASET_JSON
+
+SHA256_HEX = re.compile(r"[0-9a-f]{64}")
+
+
+def dataset_fingerprint(dataset: DatasetIndex | str | os.PathLike) -> str:
+    """Hex SHA-256 of the bytes of a dataset's ``dataset.json``.
+
+    Parameters
+    ----------
+    dataset
+        A dataset opened with :func:`zendar_dataset.format.reader.open_dataset`, or its root (local
+        path or fsspec URL), which is opened (and its ``dataset.json`` checked) first.
+
+    Raises
+    ------
+    ZendarFormatError
+        When ``dataset.json`` is missing or violates the schema (all problems listed), or vanished
+        since the dataset was opened.
+    """
+    if not isinstance(dataset, DatasetIndex):
+        dataset = open_dataset(dataset)
+    location = stores.join_location(dataset.root, DATASET_JSON)
+    try:
+        if stores.is_url(location):
+            with fsspec.open(location, "rb", **dataset.storage_options) as handle:
+                data = handle.read()
+        else:
+            with open(stores.local_path(location), "rb") as handle:
+                data = handle.read()
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError):
+        raise ZendarFormatError(f"{location}: expected the dataset's {DATASET_JSON}, found none") from None
+    return hashlib.sha256(data).hexdigest()
+
+
+def canonical_json_bytes(content: Any) -> bytes:
+    """``content`` as canonical JSON: sorted keys, no whitespace, ASCII only, no NaN."""
+    return json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False).encode("ascii")
+
+
+def canonical_json_sha256(content: Any) -> str:
+    """Hex SHA-256 of :func:`canonical_json_bytes`."""
+    return hashlib.sha256(canonical_json_bytes(content)).hexdigest()
+
+
+__all__ = ["SHA256_HEX", "canonical_json_bytes", "canonical_json_sha256", "dataset_fingerprint"]
