@@ -1,0 +1,109 @@
+"""The ``--out`` directory of ``zendar-bench``: whose it is, and which of its steps are already done.
+
+A run directory carries ``zendar-bench.json`` (what made it). ``zendar-bench`` writes only into an
+empty or missing directory or one of its own; a directory holding anything else is refused before a
+byte is written. Each step records ``<step>/step.json`` with a SHA-256 of its inputs (configuration,
+dataset fingerprint, code version, upstream steps' keys); a step whose record matches is reused, so
+an interrupted bench resumes where it stopped and an edited source file recomputes what it touches.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+
+from zendar_baselines.fingerprints import canonical_json_sha256
+
+RUN_MARKER = "zendar-bench.json"
+RUN_FORMAT = "zendar-bench-run"
+STEP_RECORD = "step.json"
+
+
+def write_json(path: Path, value: Any) -> None:
+    """Strict JSON, indented, written atomically."""
+    write_atomically(path, (json.dumps(value, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+
+
+def read_json(path: Path) -> Any:
+    """JSON of a file the bench wrote; ZendarError naming the file when it cannot be read as such."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ZendarError(f"{path}: cannot be read as the JSON zendar-bench wrote ({exc})") from None
+
+
+class RunDirectory:
+    """An output directory owned by ``zendar-bench``.
+
+    Parameters
+    ----------
+    path
+        The ``--out`` directory.
+    identity
+        What the run is (configuration name, dataset); recorded in :data:`RUN_MARKER`.
+
+    Raises
+    ------
+    ZendarError
+        When ``path`` holds files but no marker of ours (nothing is touched), or the marker says
+        another configuration made it.
+    """
+
+    def __init__(self, path: str | os.PathLike, identity: dict[str, Any]) -> None:
+        self.path = Path(path)
+        marker = self.path / RUN_MARKER
+        if self.path.exists() and not self.path.is_dir():
+            raise ZendarError(f"--out {self.path}: exists and is not a directory")
+        if marker.is_file():
+            recorded = read_json(marker)
+            if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
+                raise ZendarError(f"{marker}: not a zendar-bench run record; choose another --out")
+            if recorded.get("identity") != identity:
+                raise ZendarError(
+                    f"--out {self.path} holds a zendar-bench run of {recorded.get('identity')}, not of {identity}; "
+                    "choose another --out (nothing was changed)"
+                )
+        elif self.path.is_dir() and any(self.path.iterdir()):
+            names = sorted(entry.name for entry in self.path.iterdir())
+            shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+            raise ZendarError(
+                f"--out {self.path} holds files that zendar-bench did not write ({shown}); "
+                "choose an empty or new directory (nothing was changed)"
+            )
+        else:
+            prepare_out_dir(self.path)
+            write_json(marker, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
+        self.identity = identity
+
+    def step(self, name: str, inputs: dict[str, Any], compute: Callable[[Path], Any]) -> tuple[Path, str, bool]:
+        """Run ``compute(step_dir)`` unless the step is done with the same inputs.
+
+        Returns
+        -------
+        step_dir, key, reused
+            The step's directory, the key of its inputs (for downstream steps' inputs), and
+            whether a finished result was reused.
+        """
+        key = canonical_json_sha256(inputs)
+        step_dir = self.path / name
+        record = step_dir / STEP_RECORD
+        if record.is_file():
+            try:
+                done = json.loads(record.read_text(encoding="utf-8"))
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+                done = None
+            if isinstance(done, dict) and done.get("key") == key:
+                return step_dir, key, True
+            # Our own step made with other inputs: its files are stale, start it over.
+            shutil.rmtree(step_dir)
+        prepare_out_dir(step_dir)
+        compute(step_dir)
+        write_json(record, {"key": key, "inputs": inputs})
+        return step_dir, key, False
