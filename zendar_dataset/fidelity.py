@@ -41,6 +41,7 @@ from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.radar import FmcwParams
+from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.sim import ego as ego_model
 from zendar_dataset.sim.labels import MIN_SPEED_MPS, annotatable_cars, radar_views
 from zendar_dataset.sim.profiles import PROFILES
@@ -51,9 +52,6 @@ BANDS = ("near", "mid", "far")
 # A CFAR point counts as on a car when it falls inside the car's box grown by this much: the
 # range bin (0.18-0.6 m) plus the DOA error of a 4-antenna array at mid range (~1 deg -> 0.5 m at 30 m).
 ON_CAR_MARGIN_M = 1.0
-# The SAR value of a detection is the brightest pixel within this distance of its projection
-# (a DOA error of ~1 deg moves a point 0.25-1 m at 15-60 m).
-SAR_SEARCH_RADIUS_M = 0.5
 SIMULATION_JSON = "simulation.json"
 _SCENE_INDEX = re.compile(r"^scene-(\d+)$")
 
@@ -127,59 +125,9 @@ def _in_boxes(points_xy: np.ndarray, center: np.ndarray, length: np.ndarray, wid
     return (np.abs(along) <= length[None] / 2 + ON_CAR_MARGIN_M) & (np.abs(across) <= width[None] / 2 + ON_CAR_MARGIN_M)
 
 
-class _SarFrames:
-    """The SAR images of one scene and where ECEF points fall in them."""
-
-    def __init__(self, reader: SceneReader) -> None:
-        self.sensors = reader.sensors("sar")
-        self.timestamps = {s: reader.timestamps(f"sar/{s}") for s in self.sensors}
-        self.origin = {s: reader.array(f"sar/{s}/origin_ecef")[...] for s in self.sensors}
-        self.di = {s: reader.array(f"sar/{s}/di_ecef")[...] for s in self.sensors}
-        self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
-        self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
-        self._cache: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
-
-    def _image_db(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
-        key = (sensor, frame)
-        if key not in self._cache:
-            self._cache.clear()  # frames are visited in order: keep one per sensor at most
-            magnitude = np.abs(self.images[sensor][frame])
-            floor = float(np.median(magnitude[magnitude > 0])) if np.any(magnitude > 0) else 1.0
-            self._cache[key] = (20.0 * np.log10(np.maximum(magnitude, 1e-30) / floor), floor)
-        return self._cache[key]
-
-    def pixels(self, sensor: str, frame: int, points_ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fractional pixel coordinates ``[P, 2]`` of ECEF points in an image, and whether they are inside."""
-        basis = np.stack([self.di[sensor][frame], self.dj[sensor][frame]], axis=1)  # [3, 2]
-        ij, *_ = np.linalg.lstsq(basis, (points_ecef - self.origin[sensor][frame]).T, rcond=None)
-        ij = ij.T
-        height, width = self.images[sensor].shape[1:3]
-        inside = (ij[:, 0] >= -0.5) & (ij[:, 0] < height - 0.5) & (ij[:, 1] >= -0.5) & (ij[:, 1] < width - 0.5)
-        return ij, inside
-
-    def frame_index(self, sensor: str, timestamp_ns: int) -> int | None:
-        found = np.flatnonzero(self.timestamps[sensor] == timestamp_ns)
-        return int(found[0]) if found.size else None
-
-    def brightest_db(self, sensor: str, frame: int, points_ecef: np.ndarray) -> np.ndarray:
-        """``[P]`` brightest pixel (dB over the image's median) near each point; NaN outside the image."""
-        ij, inside = self.pixels(sensor, frame, points_ecef)
-        out = np.full(points_ecef.shape[0], np.nan)
-        if not np.any(inside):
-            return out
-        image_db, _floor = self._image_db(sensor, frame)
-        step = max(float(np.linalg.norm(self.di[sensor][frame])), 1e-6)
-        k = max(0, int(round(SAR_SEARCH_RADIUS_M / step)))
-        height, width = image_db.shape
-        for p in np.flatnonzero(inside):
-            i, j = int(round(ij[p, 0])), int(round(ij[p, 1]))
-            out[p] = image_db[max(0, i - k) : min(height, i + k + 1), max(0, j - k) : min(width, j + k + 1)].max()
-        return out
-
-
 def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) -> None:
     labels = reader.labels()
-    sar = _SarFrames(reader)
+    sar = SarFrames(reader)
     if not sar.sensors or labels is None:
         return
     calibration = reader.calibration

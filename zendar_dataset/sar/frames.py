@@ -1,0 +1,138 @@
+"""The SAR images of one scene as stored by the format, and where ECEF points fall in them.
+
+A stored SAR frame is a magnitude (or complex) image ``sar/<sensor>/image`` ``[N, H, W]`` on a plane
+grid given per frame by ``origin_ecef`` (the centre of pixel ``(0, 0)``) and the steps ``di_ecef``,
+``dj_ecef`` (metres per pixel along rows and columns), all ECEF (docs/format.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from zendar_dataset.format.reader import SceneReader
+
+# The SAR value of a point is the brightest pixel within this distance of its projection
+# (a DOA error of ~1 deg moves a point 0.25-1 m at 15-60 m).
+SAR_SEARCH_RADIUS_M = 0.5
+
+
+class SarFrames:
+    """The SAR images of one scene and where ECEF points fall in them.
+
+    Images are read lazily; the dB image of the last frame visited per call is cached, as frames
+    are visited in time order.
+
+    Parameters
+    ----------
+    reader : SceneReader
+        The scene; every sensor of kind ``sar`` is used (none is fine: ``sensors`` is then empty).
+
+    Attributes
+    ----------
+    sensors : list of str
+        SAR sensor names.
+    timestamps : dict of str to numpy.ndarray
+        ``[N]`` int64 ns per sensor.
+    origin, di, dj : dict of str to numpy.ndarray
+        ``[N, 3]`` float64 ECEF metres per sensor: pixel ``(0, 0)``'s centre and the row and
+        column steps.
+    images : dict of str to array-like
+        ``[N, H, W]`` stored images per sensor (read on access).
+    """
+
+    def __init__(self, reader: SceneReader) -> None:
+        self.sensors = reader.sensors("sar")
+        self.timestamps = {s: reader.timestamps(f"sar/{s}") for s in self.sensors}
+        self.origin = {s: reader.array(f"sar/{s}/origin_ecef")[...] for s in self.sensors}
+        self.di = {s: reader.array(f"sar/{s}/di_ecef")[...] for s in self.sensors}
+        self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
+        self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
+        self._cache: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
+
+    def image_db(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
+        """One image in dB over its median non-zero magnitude.
+
+        Parameters
+        ----------
+        sensor : str
+            SAR sensor name.
+        frame : int
+            Index into the sensor's frames.
+
+        Returns
+        -------
+        image_db : numpy.ndarray
+            ``[H, W]`` float64, ``20·log10(|pixel| / floor)``; pixels of magnitude 0 give about -600 dB.
+        floor : float
+            The median of the non-zero magnitudes (1.0 for an all-zero image), in the image's units.
+        """
+        key = (sensor, frame)
+        if key not in self._cache:
+            self._cache.clear()  # frames are visited in order: keep one at most
+            magnitude = np.abs(self.images[sensor][frame])
+            floor = float(np.median(magnitude[magnitude > 0])) if np.any(magnitude > 0) else 1.0
+            self._cache[key] = (20.0 * np.log10(np.maximum(magnitude, 1e-30) / floor), floor)
+        return self._cache[key]
+
+    def pixels(self, sensor: str, frame: int, points_ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where ECEF points project onto one image's plane.
+
+        Parameters
+        ----------
+        sensor : str
+            SAR sensor name.
+        frame : int
+            Index into the sensor's frames.
+        points_ecef : numpy.ndarray
+            ``[P, 3]`` float64 ECEF metres.
+
+        Returns
+        -------
+        ij : numpy.ndarray
+            ``[P, 2]`` float64 fractional ``(row, column)`` (least-squares projection onto the plane).
+        inside : numpy.ndarray
+            ``[P]`` bool: the nearest pixel exists.
+        """
+        basis = np.stack([self.di[sensor][frame], self.dj[sensor][frame]], axis=1)  # [3, 2]
+        ij, *_ = np.linalg.lstsq(basis, (points_ecef - self.origin[sensor][frame]).T, rcond=None)
+        ij = ij.T
+        height, width = self.images[sensor].shape[1:3]
+        inside = (ij[:, 0] >= -0.5) & (ij[:, 0] < height - 0.5) & (ij[:, 1] >= -0.5) & (ij[:, 1] < width - 0.5)
+        return ij, inside
+
+    def frame_index(self, sensor: str, timestamp_ns: int) -> int | None:
+        """Index of the sensor's frame stamped exactly ``timestamp_ns``, or None."""
+        found = np.flatnonzero(self.timestamps[sensor] == timestamp_ns)
+        return int(found[0]) if found.size else None
+
+    def brightest_db(self, sensor: str, frame: int, points_ecef: np.ndarray) -> np.ndarray:
+        """The brightest pixel near each point, in dB over the image's median magnitude.
+
+        Parameters
+        ----------
+        sensor : str
+            SAR sensor name.
+        frame : int
+            Index into the sensor's frames.
+        points_ecef : numpy.ndarray
+            ``[P, 3]`` float64 ECEF metres.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``[P]`` float64 dB (:meth:`image_db`), the maximum over the pixels within
+            :data:`SAR_SEARCH_RADIUS_M` (a square window) of the nearest pixel; NaN for a point
+            outside the image.
+        """
+        ij, inside = self.pixels(sensor, frame, points_ecef)
+        out = np.full(points_ecef.shape[0], np.nan)
+        if not np.any(inside):
+            return out
+        image_db, _floor = self.image_db(sensor, frame)
+        step = max(float(np.linalg.norm(self.di[sensor][frame])), 1e-6)
+        k = max(0, int(round(SAR_SEARCH_RADIUS_M / step)))
+        height, width = image_db.shape
+        for p in np.flatnonzero(inside):
+            i, j = int(round(ij[p, 0])), int(round(ij[p, 1]))
+            out[p] = image_db[max(0, i - k) : min(height, i + k + 1), max(0, j - k) : min(width, j + k + 1)].max()
+        return out
