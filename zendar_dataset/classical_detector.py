@@ -20,6 +20,7 @@ from sklearn.cluster import DBSCAN
 
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.radar import FmcwParams, detect, detections_to_points, estimate_azimuth
+from zendar_dataset.radar.cfar import cell_spacing
 
 CFAR_PFA = 1e-4
 # A detection is "moving" when its radial velocity is this far from the static-world value:
@@ -71,6 +72,55 @@ def mount_velocity_ego(poses: EgoPoses, point_ego: np.ndarray, timestamp_ns: int
     return poses.ecef_T_ego(timestamp_ns).inverse().rotate_vectors(velocity_ecef)
 
 
+def locate_cells(
+    cube: np.ndarray, range_bin: np.ndarray, doppler_bin: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where range-Doppler cells of one cube ``[R, D, A]`` lie, and their Doppler-test residual.
+
+    Parameters
+    ----------
+    cube : numpy.ndarray
+        ``[R, D, A]`` complex range-Doppler cube.
+    range_bin, doppler_bin : numpy.ndarray
+        ``[N]`` int cell indices (Doppler bin ``D // 2`` is zero velocity), e.g. CFAR peaks or the
+        cells of a predicted mask.
+    timestamp_ns : int
+        The cube's timestamp.
+    calibration
+        The radar's calibration record (``format.RadarCalibration``).
+    poses : EgoPoses
+        The scene's ego poses.
+
+    Returns
+    -------
+    points_ego : numpy.ndarray
+        ``[N, 3]`` float64 metres, ego frame at ``timestamp_ns`` (Bartlett DOA of each cell's antenna
+        vector, on the radar's plane).
+    residual_mps : numpy.ndarray
+        ``[N]`` float64 measured radial velocity minus a static point's at that azimuth (m/s, wrapped
+        onto the unambiguous Doppler span).
+    """
+    params = FmcwParams.from_calibration(calibration, n_samples=cube.shape[0], n_chirps=cube.shape[1])
+    range_bin_m, doppler_bin_mps = cell_spacing(params, cube.shape[0], cube.shape[1])
+    range_bin = np.asarray(range_bin, np.int64)
+    doppler_bin = np.asarray(doppler_bin, np.int64)
+    range_m = range_bin * float(range_bin_m)
+    velocity_mps = (doppler_bin - cube.shape[1] // 2) * float(doppler_bin_mps)
+    snapshots = cube[range_bin, doppler_bin]  # [N, A]
+    azimuth_rad = estimate_azimuth(snapshots, params.rx_positions_m, params.wavelength_m)
+    ego_T_radar = ego_T_sensor(calibration)
+    points_ego = detections_to_points(range_m, azimuth_rad, ego_T_radar)
+
+    # A static point's range changes at -(line of sight . radar velocity).
+    radar_velocity_ego = mount_velocity_ego(poses, ego_T_radar.translation, timestamp_ns)
+    line_of_sight_radar = np.stack([np.cos(azimuth_rad), np.sin(azimuth_rad), np.zeros_like(azimuth_rad)], axis=1)
+    static_mps = -ego_T_radar.rotate_vectors(line_of_sight_radar) @ radar_velocity_ego
+    # Doppler is ambiguous modulo D bins: compare velocities on that circle.
+    span_mps = cube.shape[1] * params.doppler_bin_mps
+    residual_mps = (velocity_mps - static_mps + span_mps / 2) % span_mps - span_mps / 2
+    return points_ego, residual_mps
+
+
 def radar_points(cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses) -> RadarPoints:
     """Every CFAR detection of one cube ``[R, D, A]`` with its Doppler-test residual.
 
@@ -79,18 +129,7 @@ def radar_points(cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPos
     """
     params = FmcwParams.from_calibration(calibration, n_samples=cube.shape[0], n_chirps=cube.shape[1])
     found = detect(cube, params, method="ca", pfa=CFAR_PFA)
-    snapshots = cube[found.range_bin, found.doppler_bin]  # [N, A]
-    azimuth_rad = estimate_azimuth(snapshots, params.rx_positions_m, params.wavelength_m)
-    ego_T_radar = ego_T_sensor(calibration)
-    points_ego = detections_to_points(found.range_m, azimuth_rad, ego_T_radar)
-
-    # A static point's range changes at -(line of sight . radar velocity).
-    radar_velocity_ego = mount_velocity_ego(poses, ego_T_radar.translation, timestamp_ns)
-    line_of_sight_radar = np.stack([np.cos(azimuth_rad), np.sin(azimuth_rad), np.zeros_like(azimuth_rad)], axis=1)
-    static_mps = -ego_T_radar.rotate_vectors(line_of_sight_radar) @ radar_velocity_ego
-    # Doppler is ambiguous modulo D bins: compare velocities on that circle.
-    span_mps = cube.shape[1] * params.doppler_bin_mps
-    residual_mps = (found.velocity_mps - static_mps + span_mps / 2) % span_mps - span_mps / 2
+    points_ego, residual_mps = locate_cells(cube, found.range_bin, found.doppler_bin, timestamp_ns, calibration, poses)
     return RadarPoints(points_ego, np.asarray(found.range_m, np.float64), 10.0 ** (found.snr_db / 10.0), residual_mps)
 
 
@@ -100,11 +139,18 @@ def moving_points(cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPo
     return found.points_ego[found.moving], found.snr[found.moving]
 
 
+def cluster_labels(points_xy: np.ndarray, eps_m: float = CLUSTER_EPS_M) -> np.ndarray:
+    """``[N]`` int DBSCAN cluster of each point ``[N, 2]`` (metres), every point in one (min_samples=1)."""
+    if len(points_xy) == 0:
+        return np.zeros(0, np.int64)
+    return DBSCAN(eps=eps_m, min_samples=1).fit_predict(points_xy)
+
+
 def cluster_cars(points_ego: np.ndarray, snr: np.ndarray) -> list[dict[str, float]]:
     """One prediction per DBSCAN cluster: SNR-weighted centre, score = summed linear SNR."""
     if len(points_ego) == 0:
         return []
-    labels = DBSCAN(eps=CLUSTER_EPS_M, min_samples=1).fit_predict(points_ego[:, :2])
+    labels = cluster_labels(points_ego[:, :2])
     cars = []
     for label in np.unique(labels):
         members = labels == label
