@@ -1,0 +1,511 @@
+"""Training and inference of the CNN dynamic-object detectors (paper §4.2), single- or multi-process.
+
+``train`` fits a model that maps stacked range-Doppler maps ``[B, C, R, D]`` to per-cell logits
+``[B, 1, R, D]`` with Adam and a binary cross-entropy on the cells whose mask is 0 (background) or 1
+(moving); uncertain cells (2) give no gradient. It checkpoints after every epoch and, called again
+with the same inputs, resumes from the latest checkpoint of the run, reproducing the weights of an
+uninterrupted run exactly.
+
+Reproducibility: the sample order of epoch ``e`` is a permutation drawn from ``(seed, e)`` alone
+(``DistributedSampler``), and the torch / numpy / python generators are re-seeded at the start of
+every epoch from ``(seed, e, rank)``; nothing depends on how many epochs ran in this process.
+
+Multi-process: under ``torchrun`` (``WORLD_SIZE`` > 1) each process takes ``batch_size / WORLD_SIZE``
+samples of every global batch, and the loss is normalised by the global count of labelled cells, so
+the gradient equals that of one process on the whole global batch (up to float summation order).
+Batch-norm statistics are per process, as usual with ``DistributedDataParallel``: a model with batch
+norm trains slightly differently on several processes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import random
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+import torch.nn.functional as F
+from torch import nn
+from torch.utils.data import ConcatDataset, DataLoader, Dataset
+from torch.utils.data.distributed import DistributedSampler
+from tqdm.auto import tqdm
+
+from zendar_dataset.errors import ZendarError
+
+from zendar_baselines.checkpoints import (
+    CheckpointIntegrityError,
+    load_checkpoint,
+    load_model_state,
+    model_architecture,
+    save_checkpoint,
+    unwrap_model,
+)
+from zendar_baselines.code_version import code_version
+from zendar_baselines.configs import Schedule
+from zendar_baselines.inputs import MASK_BACKGROUND, MASK_MOVING, MASK_UNCERTAIN, MaskFrames
+
+MAX_POS_WEIGHT = 100.0
+_CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """What ``train`` made.
+
+    Attributes
+    ----------
+    checkpoint_path : Path
+        The checkpoint of the last epoch (``out_dir/epoch-NNNN.pt``).
+    epoch_losses : tuple of float
+        Mean loss per labelled cell of every epoch 1 .. ``schedule.epochs`` (resumed epochs included).
+    resumed_from_epoch : int
+        Epochs read back from an earlier call (0: trained from the start).
+    pos_weight : float
+        Weight of the moving class in the loss.
+    """
+
+    checkpoint_path: Path
+    epoch_losses: tuple[float, ...]
+    resumed_from_epoch: int
+    pos_weight: float
+
+
+def masked_bce(logits: torch.Tensor, targets: torch.Tensor, pos_weight: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Summed binary cross-entropy over labelled cells, and their count.
+
+    Parameters
+    ----------
+    logits : Tensor, float, shape [B, 1, R, D]
+        The model's output.
+    targets : Tensor, uint8, shape [B, R, D]
+        0 background, 1 moving, 2 uncertain (left out: no loss, no gradient).
+    pos_weight : float
+        Multiplies the loss of moving cells.
+
+    Returns
+    -------
+    loss_sum : Tensor, scalar
+        ``sum over labelled cells of -(w y log σ(z) + (1 - y) log(1 - σ(z)))``.
+    n_labelled : Tensor, scalar float
+        Cells with target 0 or 1.
+    """
+    if logits.ndim != 4 or logits.shape[1] != 1 or logits.shape[0] != targets.shape[0] or logits.shape[2:] != targets.shape[1:]:
+        raise ZendarError(
+            f"masked_bce: logits {tuple(logits.shape)} do not fit targets {tuple(targets.shape)} "
+            "(expected logits [B, 1, R, D] for targets [B, R, D])"
+        )
+    labelled = targets != MASK_UNCERTAIN
+    # Ignored cells are replaced before the loss, not multiplied by 0 after it: a non-finite logit
+    # there (NaN · 0 = NaN) must reach neither the sum nor the gradient.
+    logits = torch.where(labelled, logits[:, 0], torch.zeros((), dtype=logits.dtype, device=logits.device))
+    target_float = (targets == MASK_MOVING).to(logits.dtype)
+    per_cell = F.binary_cross_entropy_with_logits(
+        logits, target_float, pos_weight=torch.tensor(pos_weight, dtype=logits.dtype, device=logits.device), reduction="none"
+    )
+    loss_sum = torch.where(labelled, per_cell, torch.zeros((), dtype=per_cell.dtype, device=per_cell.device)).sum()
+    return loss_sum, labelled.sum().to(logits.dtype)
+
+
+def _mask_class_counts(data: Dataset) -> tuple[int, int]:
+    if isinstance(data, MaskFrames):
+        return data.class_counts()
+    if isinstance(data, ConcatDataset):
+        counts = [_mask_class_counts(part) for part in data.datasets]
+        return sum(c[0] for c in counts), sum(c[1] for c in counts)
+    background = moving = 0
+    for index in range(len(data)):
+        target = torch.as_tensor(data[index][1])
+        background += int((target == MASK_BACKGROUND).sum())
+        moving += int((target == MASK_MOVING).sum())
+    return background, moving
+
+
+def positive_class_weight(data: Dataset) -> float:
+    """Loss weight of moving cells: ``sqrt(background cells / moving cells)``, clipped to [1, 100].
+
+    Moving cells are about 1 % of labelled cells. The full ratio (~99) would balance the classes but
+    move the 0.5 decision threshold so far that most noise peaks near a car are called moving; no
+    weight lets the network settle on "all background" early. The square root (~10) is the usual
+    compromise: rare positives still drive the gradient while probabilities stay usable at 0.5.
+    The table's metric is an area under a curve, which no monotone re-weighting changes much.
+    Counted over the training masks once (uncertain cells left out); 1.0 when there is no moving cell.
+    """
+    background, moving = _mask_class_counts(data)
+    if moving == 0:
+        return 1.0
+    return float(min(max(math.sqrt(background / moving), 1.0), MAX_POS_WEIGHT))
+
+
+def seed_everything(seed: int) -> None:
+    """Seed python's ``random``, numpy's global generator and torch (CPU and every CUDA device)."""
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def _epoch_seed(seed: int, epoch: int, rank: int) -> int:
+    return int(np.random.SeedSequence([seed, epoch, rank]).generate_state(1, dtype=np.uint64)[0] >> 1)
+
+
+def state_sha256(model: nn.Module) -> str:
+    """SHA-256 over a model's state (names, dtypes, shapes and bytes of every tensor, in name order)."""
+    digest = hashlib.sha256()
+    for name, tensor in sorted(unwrap_model(model).state_dict().items()):
+        flat = tensor.detach().cpu().contiguous().reshape(-1)
+        digest.update(f"{name}\0{flat.dtype}\0{tuple(tensor.shape)}\0".encode())
+        digest.update(flat.view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+@dataclass(frozen=True)
+class _Process:
+    rank: int
+    world_size: int
+    device: torch.device
+    started_group: bool
+
+    @property
+    def is_main(self) -> bool:
+        return self.rank == 0
+
+
+@contextmanager
+def _process_group(device: str | torch.device) -> Iterator[_Process]:
+    world_size = int(os.environ.get("WORLD_SIZE", "1"))
+    device = torch.device(device)
+    if world_size <= 1:
+        yield _Process(rank=0, world_size=1, device=device, started_group=False)
+        return
+    started = False
+    if not dist.is_initialized():
+        backend = "nccl" if device.type == "cuda" else "gloo"
+        dist.init_process_group(backend=backend)
+        started = True
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+    if device.type == "cuda":
+        torch.cuda.set_device(device)
+    try:
+        yield _Process(rank=dist.get_rank(), world_size=dist.get_world_size(), device=device, started_group=started)
+    finally:
+        if started:
+            dist.destroy_process_group()
+
+
+def _broadcast(value: Any, process: _Process) -> Any:
+    if process.world_size == 1:
+        return value
+    box = [value]
+    dist.broadcast_object_list(box, src=0)
+    return box[0]
+
+
+def checkpoint_path(out_dir: str | os.PathLike, epoch: int) -> Path:
+    """``out_dir/epoch-NNNN.pt``: the checkpoint written after ``epoch`` epochs."""
+    return Path(out_dir) / f"epoch-{epoch:04d}.pt"
+
+
+def _run_identity(model: nn.Module, schedule: Schedule, seed: int, n_samples: int, initial_sha256: str) -> dict[str, Any]:
+    # Everything that decides the weights after epoch e, except the number of epochs still to run.
+    return {
+        "architecture": model_architecture(model),
+        "lr": float(schedule.lr),
+        "batch_size": int(schedule.batch_size),
+        "seed": int(seed),
+        "n_samples": int(n_samples),
+        "initial_weights_sha256": initial_sha256,
+        "code_version": code_version(),
+    }
+
+
+def _find_resume_point(out_dir: Path, identity: dict[str, Any], epochs: int) -> tuple[int, dict[str, Any] | None]:
+    """The latest usable checkpoint of this run with at most ``epochs`` epochs: (epoch, checkpoint)."""
+    found = []
+    if out_dir.is_dir():
+        for entry in out_dir.iterdir():
+            match = _CHECKPOINT_NAME.match(entry.name)
+            if match:
+                found.append(int(match[1]))
+    for epoch in sorted(found, reverse=True):
+        path = checkpoint_path(out_dir, epoch)
+        try:
+            checkpoint = load_checkpoint(path)
+        except CheckpointIntegrityError as exc:
+            # A write cut short (the manifest did not record it) is recomputed from the epoch before.
+            tqdm.write(f"not resuming from {path}: {exc}")
+            continue
+        recorded = checkpoint.get("run")
+        if recorded != identity:
+            differing = sorted(key for key in identity if not isinstance(recorded, dict) or recorded.get(key) != identity[key])
+            raise ZendarError(
+                f"{out_dir}: holds checkpoints of another run (differs in {', '.join(differing)}); "
+                "choose another out_dir or remove its epoch-*.pt files"
+            )
+        if epoch <= epochs:
+            return epoch, checkpoint
+    return 0, None
+
+
+def _check_schedule(schedule: Schedule, world_size: int) -> None:
+    if not (isinstance(schedule.epochs, int) and schedule.epochs >= 1):
+        raise ZendarError(f"schedule.epochs must be a positive integer, found {schedule.epochs!r}")
+    if not (isinstance(schedule.batch_size, int) and schedule.batch_size >= 1):
+        raise ZendarError(f"schedule.batch_size must be a positive integer, found {schedule.batch_size!r}")
+    if not (math.isfinite(schedule.lr) and schedule.lr >= 0):
+        raise ZendarError(f"schedule.lr must be a finite number >= 0, found {schedule.lr!r}")
+    if schedule.batch_size % world_size:
+        raise ZendarError(
+            f"schedule.batch_size {schedule.batch_size} (the global batch) is not divisible by the "
+            f"{world_size} processes (WORLD_SIZE)"
+        )
+
+
+def train(
+    model: nn.Module,
+    data: Dataset,
+    schedule: Schedule,
+    *,
+    seed: int,
+    out_dir: str | os.PathLike,
+    device: str | torch.device = "cpu",
+    init_from: str | os.PathLike | None = None,
+    progress: bool = True,
+    description: str = "",
+    num_workers: int = 0,
+) -> TrainResult:
+    """Train ``model`` in place on ``data``: Adam, masked BCE, a checkpoint per epoch, resumable.
+
+    Parameters
+    ----------
+    model : nn.Module
+        Freshly built (its initial weights are part of the run's identity, so build it after
+        ``seed_everything(seed)`` for a reproducible run); maps float32 ``[B, C, R, D]`` to logits
+        ``[B, 1, R, D]`` and carries ``model.architecture``. Holds the final weights on return.
+    data : Dataset
+        Samples ``(input float32 [C, R, D], mask uint8 [R, D])``, e.g. ``MaskFrames`` or a
+        ``ConcatDataset`` of them.
+    schedule : Schedule
+        Learning rate, global batch size (split evenly over processes) and total epochs.
+    seed : int
+        Decides the sample order and every random draw during training.
+    out_dir : path
+        Checkpoints ``epoch-NNNN.pt`` and ``manifest.json``; one run per directory. When it
+        already holds checkpoints of this run (same architecture, initial weights, lr, batch
+        size, seed, sample count and code version), training resumes after the latest one with at
+        most ``schedule.epochs`` epochs (and returns at once when that is the last).
+    device : str or torch.device
+        ``"cpu"`` or ``"cuda"`` (under torchrun each process takes ``cuda:LOCAL_RANK``).
+    init_from : path, optional
+        A checkpoint whose weights (same architecture) replace the model's before training
+        (pretraining → fine-tuning); the optimizer starts fresh.
+    progress : bool
+        Show a tqdm bar with the epoch and running loss (rank 0 only).
+    description : str
+        Prefix of the progress bar.
+    num_workers : int
+        DataLoader worker processes.
+
+    Returns
+    -------
+    TrainResult
+
+    Raises
+    ------
+    ZendarError
+        For an invalid schedule or empty data, a model output of the wrong shape, ``out_dir``
+        holding another run, or an unusable ``init_from`` checkpoint (CheckpointError).
+    """
+    out_dir = Path(out_dir)
+    with _process_group(device) as process:
+        _check_schedule(schedule, process.world_size)
+        if len(data) == 0:
+            raise ZendarError("train: the dataset has no samples")
+        if process.device.type == "cuda":
+            torch.backends.cudnn.benchmark = False
+            torch.backends.cudnn.deterministic = True
+        model.to(process.device)
+        init_record: dict[str, Any] = {}
+        if init_from is not None:
+            init_checkpoint = load_checkpoint(init_from, expected_architecture=model_architecture(model), model=model)
+            init_record = {"path": str(Path(init_from).resolve()), "epoch": int(init_checkpoint["epoch"])}
+        trained: nn.Module = model
+        if process.world_size > 1:
+            # The wrapper broadcasts rank 0's weights, so every rank starts from the same ones.
+            device_ids = [process.device.index] if process.device.type == "cuda" else None
+            trained = nn.parallel.DistributedDataParallel(model, device_ids=device_ids)
+        identity = _run_identity(model, schedule, seed, len(data), state_sha256(model))
+        start_epoch, resumed, failure = 0, None, None
+        if process.is_main:
+            try:
+                out_dir.mkdir(parents=True, exist_ok=True)
+                start_epoch, resumed = _find_resume_point(out_dir, identity, schedule.epochs)
+            except (ZendarError, OSError) as exc:
+                failure = exc
+        # Rank 0 alone decides, and its error reaches every rank (none is left waiting for the others).
+        start_epoch, failure = _broadcast((start_epoch, failure), process)
+        if failure is not None:
+            raise failure
+
+        optimizer = torch.optim.Adam(trained.parameters(), lr=schedule.lr)
+        losses: list[float] = []
+        if start_epoch > 0:
+            resume_path = checkpoint_path(out_dir, start_epoch)
+            checkpoint = resumed if process.is_main else load_checkpoint(resume_path, identity["architecture"])
+            load_model_state(model, checkpoint, resume_path)
+            optimizer.load_state_dict(checkpoint["optimizer_state"])
+            losses = [float(v) for v in checkpoint["losses"][:start_epoch]]
+            pos_weight = float(checkpoint["pos_weight"])
+        else:
+            pos_weight = positive_class_weight(data)
+
+        sampler = DistributedSampler(
+            data, num_replicas=process.world_size, rank=process.rank, shuffle=True, seed=seed, drop_last=False
+        )
+        loader = DataLoader(
+            data,
+            batch_size=schedule.batch_size // process.world_size,
+            sampler=sampler,
+            num_workers=num_workers,
+            generator=torch.Generator().manual_seed(seed),
+            pin_memory=process.device.type == "cuda",
+        )
+        config = {"schedule": asdict(schedule), "seed": int(seed), "world_size": process.world_size,
+                  "init_from": init_record, "description": description}
+        remaining = schedule.epochs - start_epoch
+        bar = tqdm(
+            total=remaining * len(loader),
+            desc=description or "train",
+            disable=not (progress and process.is_main) or remaining == 0,
+            leave=False,
+            unit="batch",
+        )
+        with bar:
+            for epoch in range(start_epoch + 1, schedule.epochs + 1):
+                sampler.set_epoch(epoch)
+                epoch_seed = _epoch_seed(seed, epoch, process.rank)
+                seed_everything(epoch_seed)
+                loader.generator.manual_seed(epoch_seed)  # worker seeds, independent of epochs run before
+                losses.append(_train_epoch(trained, loader, optimizer, pos_weight, process, bar, epoch, schedule.epochs, description))
+                if process.is_main:
+                    save_checkpoint(
+                        checkpoint_path(out_dir, epoch), model, optimizer, epoch, config,
+                        extra={
+                            "run": identity,
+                            "losses": list(losses),
+                            "pos_weight": pos_weight,
+                            "rng_state": {"seed": int(seed), "derivation": "SeedSequence([seed, epoch, rank]) at each epoch's start"},
+                        },
+                    )
+        if remaining == 0 and process.is_main and progress:
+            tqdm.write(f"{description or 'train'}: {schedule.epochs} epochs already in {checkpoint_path(out_dir, start_epoch)}")
+        if process.world_size > 1:
+            dist.barrier()  # every rank returns only once rank 0's last checkpoint is on disk
+        return TrainResult(
+            checkpoint_path=checkpoint_path(out_dir, schedule.epochs),
+            epoch_losses=tuple(losses),
+            resumed_from_epoch=start_epoch,
+            pos_weight=pos_weight,
+        )
+
+
+def _train_epoch(
+    trained: nn.Module,
+    loader: DataLoader,
+    optimizer: torch.optim.Optimizer,
+    pos_weight: float,
+    process: _Process,
+    bar: tqdm,
+    epoch: int,
+    epochs: int,
+    description: str,
+) -> float:
+    """One epoch; the mean loss per labelled cell over all processes."""
+    trained.train()
+    bar.set_description(f"{description + ' ' if description else ''}epoch {epoch}/{epochs}")
+    epoch_sum = torch.zeros(2, dtype=torch.float64)
+    for inputs, targets in loader:
+        inputs = inputs.to(process.device, non_blocking=True)
+        targets = targets.to(process.device, non_blocking=True)
+        logits = trained(inputs)
+        loss_sum, n_labelled = masked_bce(logits, targets, pos_weight)
+        totals = torch.stack([loss_sum.detach(), n_labelled]).to(torch.float64)
+        if process.world_size > 1:
+            dist.all_reduce(totals)
+        # DistributedDataParallel averages gradients over processes; multiplying by their number
+        # makes the step that of the global batch's mean over its labelled cells.
+        loss = loss_sum * (process.world_size / max(float(totals[1]), 1.0))
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        epoch_sum += totals.cpu()
+        bar.update(1)
+        bar.set_postfix(loss=f"{float(epoch_sum[0] / max(float(epoch_sum[1]), 1.0)):.4f}")
+    return float(epoch_sum[0] / max(float(epoch_sum[1]), 1.0))
+
+
+def predict_masks(
+    model: nn.Module,
+    inputs: np.ndarray | torch.Tensor,
+    batch_size: int,
+    device: str | torch.device = "cpu",
+) -> np.ndarray:
+    """Per-cell probability of a moving object.
+
+    Parameters
+    ----------
+    model : nn.Module
+        Maps ``[B, C, R, D]`` to logits ``[B, 1, R, D]``; run in eval mode (restored afterwards).
+    inputs : array, float32, shape [N, C, R, D]
+        Stacked windows (``stack_window``); a memory-mapped array is read one batch at a time.
+    batch_size : int
+    device : str or torch.device
+
+    Returns
+    -------
+    ndarray, float32, shape [N, R, D]
+        ``sigmoid(logit)`` in [0, 1].
+    """
+    if getattr(inputs, "ndim", None) != 4:
+        raise ZendarError(f"predict_masks: expected inputs [N, C, R, D], found shape {tuple(getattr(inputs, 'shape', ()))}")
+    if not (isinstance(batch_size, int) and batch_size >= 1):
+        raise ZendarError(f"predict_masks: batch_size must be a positive integer, found {batch_size!r}")
+    n, _, n_range, n_doppler = inputs.shape
+    probabilities = np.empty((n, n_range, n_doppler), dtype=np.float32)
+    was_training = model.training
+    model.to(device).eval()
+    try:
+        with torch.inference_mode():
+            for start in range(0, n, batch_size):
+                batch = torch.as_tensor(np.asarray(inputs[start : start + batch_size], dtype=np.float32)).to(device)
+                logits = model(batch)
+                if logits.shape != (len(batch), 1, n_range, n_doppler):
+                    raise ZendarError(
+                        f"predict_masks: model returned {tuple(logits.shape)} for input {tuple(batch.shape)}; "
+                        f"expected [{len(batch)}, 1, {n_range}, {n_doppler}]"
+                    )
+                probabilities[start : start + len(batch)] = torch.sigmoid(logits[:, 0].float()).cpu().numpy()
+    finally:
+        model.train(was_training)
+    return probabilities
+
+
+__all__ = [
+    "MAX_POS_WEIGHT",
+    "TrainResult",
+    "checkpoint_path",
+    "masked_bce",
+    "positive_class_weight",
+    "predict_masks",
+    "seed_everything",
+    "state_sha256",
+    "train",
+]

@@ -1,0 +1,231 @@
+"""Training: the masked loss, learning a hand-made task, determinism, resume, init_from, prediction."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from zendar_dataset.errors import ZendarError
+
+from zendar_baselines.checkpoints import MANIFEST_NAME, load_checkpoint
+from zendar_baselines.configs import Schedule
+from zendar_baselines.inputs import MaskFrames
+from zendar_baselines.training import (
+    checkpoint_path,
+    masked_bce,
+    positive_class_weight,
+    predict_masks,
+    seed_everything,
+    train,
+)
+
+from tests.baselines.tiny_mask_model import TinyMaskNet, moving_target_task
+
+SCHEDULE = Schedule(lr=1e-2, batch_size=8, epochs=2)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    # The models here are tiny: a second thread only adds contention on a busy machine.
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def task_data():
+    inputs, masks = moving_target_task(48, seed=0)
+    return MaskFrames(inputs, masks)
+
+
+def _model(seed=0, in_channels=2):
+    seed_everything(seed)
+    return TinyMaskNet(in_channels)
+
+
+def _weights(model):
+    return {name: tensor.clone() for name, tensor in model.state_dict().items()}
+
+
+def _assert_same_weights(a, b):
+    assert a.keys() == b.keys()
+    for name in a:
+        assert torch.equal(a[name], b[name]), name
+
+
+def test_masked_bce_by_hand():
+    logits = torch.tensor([0.5, -1.0, 2.0, 7.0]).reshape(1, 1, 1, 4)
+    targets = torch.tensor([1, 0, 2, 2], dtype=torch.uint8).reshape(1, 1, 4)
+    loss_sum, n_labelled = masked_bce(logits, targets, pos_weight=3.0)
+    # moving: -3 log σ(0.5) = 3 log(1 + e^-0.5); background: -log(1 - σ(-1)) = log(1 + e^-1).
+    expected = 3 * math.log(1 + math.exp(-0.5)) + math.log(1 + math.exp(-1.0))
+    assert float(n_labelled) == 2.0
+    assert float(loss_sum) == pytest.approx(expected, rel=1e-6)
+
+
+def test_uncertain_cells_give_no_gradient():
+    logits = torch.randn(2, 1, 3, 4, requires_grad=True)
+    all_uncertain = torch.full((2, 3, 4), 2, dtype=torch.uint8)
+    loss_sum, n_labelled = masked_bce(logits, all_uncertain, pos_weight=10.0)
+    loss_sum.backward()
+    assert float(n_labelled) == 0.0 and float(loss_sum.detach()) == 0.0
+    assert torch.count_nonzero(logits.grad) == 0
+
+    mixed = torch.zeros((2, 3, 4), dtype=torch.uint8)
+    mixed[0, 1, 2] = 1
+    mixed[1, 2, :] = 2
+    with torch.no_grad():
+        poisoned = logits.detach().clone()
+        poisoned[1, 0, 2, :] = float("nan")  # a non-finite logit in ignored cells stays out of the sum
+    poisoned.requires_grad_(True)
+    loss_sum, _ = masked_bce(poisoned, mixed, pos_weight=10.0)
+    loss_sum.backward()
+    assert math.isfinite(float(loss_sum.detach()))
+    assert torch.all(poisoned.grad[1, 0, 2, :] == 0)
+    assert torch.all(poisoned.grad[0] != 0)
+
+
+def test_masked_bce_refuses_misshapen_logits():
+    with pytest.raises(ZendarError, match=r"logits \(2, 3, 4\)"):
+        masked_bce(torch.zeros(2, 3, 4), torch.zeros(2, 3, 4, dtype=torch.uint8), 1.0)
+
+
+def test_positive_class_weight_by_hand():
+    masks = np.zeros((4, 5, 5), dtype=np.uint8)
+    masks[:, 0, 0] = 1  # 4 moving cells
+    masks[:, 1, :] = 2  # 20 uncertain, left out; 76 background
+    data = MaskFrames(np.zeros((4, 1, 5, 5), dtype=np.float32), masks)
+    assert positive_class_weight(data) == pytest.approx(math.sqrt(76 / 4))
+    assert positive_class_weight(MaskFrames(np.zeros((4, 1, 5, 5), np.float32), np.zeros((4, 5, 5), np.uint8))) == 1.0
+
+
+def _f1(probabilities, masks):
+    labelled = masks != 2
+    predicted = (probabilities > 0.5) & labelled
+    truth = masks == 1
+    tp = np.count_nonzero(predicted & truth)
+    return 2 * tp / (np.count_nonzero(predicted) + np.count_nonzero(truth))
+
+
+def test_small_model_learns_the_moving_target_task(tmp_path):
+    inputs, masks = moving_target_task(128, seed=1)
+    held_inputs, held_masks = moving_target_task(64, seed=2)
+    model = _model(0)
+    before = _f1(predict_masks(model, held_inputs, 32, "cpu"), held_masks)
+    result = train(model, MaskFrames(inputs, masks), Schedule(lr=1e-2, batch_size=16, epochs=20),
+                   seed=0, out_dir=tmp_path, progress=False)
+    assert result.epoch_losses[-1] < 0.3 * result.epoch_losses[0]
+    after = _f1(predict_masks(model, held_inputs, 32, "cpu"), held_masks)
+    assert before < 0.2 and after > 0.8, (before, after)
+
+
+def test_same_seed_same_weights_other_seed_other_weights(tmp_path, task_data):
+    runs = {}
+    for name, seed in (("a", 5), ("b", 5), ("c", 6)):
+        model = _model(0)
+        result = train(model, task_data, SCHEDULE, seed=seed, out_dir=tmp_path / name, progress=False)
+        runs[name] = (_weights(model), result.epoch_losses)
+    _assert_same_weights(runs["a"][0], runs["b"][0])
+    assert runs["a"][1] == runs["b"][1]
+    assert not torch.equal(runs["a"][0]["features.weight"], runs["c"][0]["features.weight"])
+
+
+def test_resume_equals_an_uninterrupted_run(tmp_path, task_data):
+    uninterrupted = _model(0)
+    whole = train(uninterrupted, task_data, SCHEDULE, seed=1, out_dir=tmp_path / "whole", progress=False)
+
+    first = train(_model(0), task_data, Schedule(SCHEDULE.lr, SCHEDULE.batch_size, 1),
+                  seed=1, out_dir=tmp_path / "cut", progress=False)
+    assert first.resumed_from_epoch == 0 and len(first.epoch_losses) == 1
+    # Scramble the global generators as another program would before the restart.
+    torch.manual_seed(1234)
+    np.random.seed(99)
+    resumed_model = _model(0)
+    resumed = train(resumed_model, task_data, SCHEDULE, seed=1, out_dir=tmp_path / "cut", progress=False)
+    assert resumed.resumed_from_epoch == 1
+    _assert_same_weights(_weights(uninterrupted), _weights(resumed_model))
+    assert resumed.epoch_losses == whole.epoch_losses
+    assert resumed.checkpoint_path == checkpoint_path(tmp_path / "cut", 2)
+
+    again_model = _model(0)
+    again = train(again_model, task_data, SCHEDULE, seed=1, out_dir=tmp_path / "cut", progress=False)
+    assert again.resumed_from_epoch == 2 and again.epoch_losses == whole.epoch_losses
+    _assert_same_weights(_weights(uninterrupted), _weights(again_model))
+
+
+def test_checkpoint_the_manifest_does_not_vouch_for_is_recomputed(tmp_path, task_data):
+    reference = _model(0)
+    train(reference, task_data, SCHEDULE, seed=2, out_dir=tmp_path / "ref", progress=False)
+    out = tmp_path / "run"
+    train(_model(0), task_data, SCHEDULE, seed=2, out_dir=out, progress=False)
+    # As if the process died between renaming epoch 2 into place and recording it in the manifest.
+    manifest = json.loads((out / MANIFEST_NAME).read_text())
+    del manifest["epoch-0002.pt"]
+    (out / MANIFEST_NAME).write_text(json.dumps(manifest))
+    model = _model(0)
+    result = train(model, task_data, SCHEDULE, seed=2, out_dir=out, progress=False)
+    assert result.resumed_from_epoch == 1
+    _assert_same_weights(_weights(reference), _weights(model))
+    load_checkpoint(out / "epoch-0002.pt")  # vouched for again
+
+
+def test_out_dir_of_another_run_is_refused(tmp_path, task_data):
+    train(_model(0), task_data, SCHEDULE, seed=3, out_dir=tmp_path, progress=False)
+    with pytest.raises(ZendarError, match=r"another run \(differs in seed\)"):
+        train(_model(0), task_data, SCHEDULE, seed=4, out_dir=tmp_path, progress=False)
+    with pytest.raises(ZendarError, match=r"differs in initial_weights_sha256"):
+        train(_model(1), task_data, SCHEDULE, seed=3, out_dir=tmp_path, progress=False)
+
+
+def test_init_from_copies_weights_and_starts_a_fresh_optimizer(tmp_path, task_data):
+    pretrained = _model(0)
+    pre = train(pretrained, task_data, SCHEDULE, seed=0, out_dir=tmp_path / "pre", progress=False)
+    fine = _model(1)
+    assert not torch.equal(fine.features.weight, pretrained.features.weight)
+    # lr 0: Adam leaves the weights where init_from put them.
+    result = train(fine, task_data, Schedule(lr=0.0, batch_size=8, epochs=1), seed=0,
+                   out_dir=tmp_path / "fine", init_from=pre.checkpoint_path, progress=False)
+    _assert_same_weights(_weights(pretrained), _weights(fine))
+    checkpoint = load_checkpoint(result.checkpoint_path)
+    steps_per_epoch = math.ceil(len(task_data) / 8)
+    assert checkpoint["optimizer_state"]["state"][0]["step"] == steps_per_epoch  # not 3 epochs' worth
+    assert checkpoint["config"]["init_from"]["epoch"] == 2
+
+
+def test_init_from_another_architecture_names_both(tmp_path, task_data):
+    pre = train(_model(0), task_data, SCHEDULE, seed=0, out_dir=tmp_path / "pre", progress=False)
+    other = TinyMaskNet(in_channels=2, width=4)
+    with pytest.raises(ZendarError) as excinfo:
+        train(other, task_data, SCHEDULE, seed=0, out_dir=tmp_path / "fine", init_from=pre.checkpoint_path, progress=False)
+    message = str(excinfo.value)
+    assert str(pre.checkpoint_path) in message and '"width_scale": 1.0' in message and '"width_scale": 0.5' in message
+
+
+def test_bad_schedules_are_refused(tmp_path, task_data):
+    for schedule, match in ((Schedule(1e-3, 8, 0), "epochs"), (Schedule(1e-3, 0, 1), "batch_size"),
+                            (Schedule(float("nan"), 8, 1), "lr")):
+        with pytest.raises(ZendarError, match=match):
+            train(_model(0), task_data, schedule, seed=0, out_dir=tmp_path, progress=False)
+
+
+def test_progress_bar_shows_epoch_and_loss(tmp_path, task_data, capsys):
+    train(_model(0), task_data, SCHEDULE, seed=0, out_dir=tmp_path, description="tiny", progress=True)
+    err = capsys.readouterr().err
+    assert "tiny epoch 2/2" in err and "loss=" in err
+
+
+def test_predict_masks_is_the_sigmoid_of_the_logits():
+    model = _model(3)
+    model.train()
+    inputs, _ = moving_target_task(5, seed=4)
+    probabilities = predict_masks(model, inputs, batch_size=2, device="cpu")
+    assert probabilities.shape == (5, 16, 8) and probabilities.dtype == np.float32
+    with torch.no_grad():
+        logits = model(torch.from_numpy(inputs))[:, 0].numpy()
+    np.testing.assert_allclose(probabilities, 1 / (1 + np.exp(-logits)), rtol=1e-5, atol=1e-7)
+    assert model.training
