@@ -90,6 +90,13 @@ def _root_text(dataset_root: str | os.PathLike) -> str:
     return os.fspath(dataset_root) if stores.is_url(dataset_root) else str(Path(dataset_root).resolve())
 
 
+def _make_directory(out: Path) -> None:
+    try:
+        prepare_out_dir(out)
+    except OSError as exc:
+        raise AutoLabelStoreError(f"auto-label store {out}: cannot be created ({exc.strerror or exc})") from None
+
+
 def _created_utc() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
@@ -383,13 +390,13 @@ class AutoLabelStore:
                 remove_stale_temporaries(out)
                 return store
             # Labels made with other parameters or code: start over, dropping only files our manifest lists.
-            prepare_out_dir(out)
+            _make_directory(out)
             remove_stale_temporaries(out)
             store._write_manifest()
             for scene_id in recorded["scenes"]:
                 store.scene_path(scene_id).unlink(missing_ok=True)
             return store
-        prepare_out_dir(out)
+        _make_directory(out)
         remove_stale_temporaries(out)
         store._write_manifest()
         return store

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.report import write_atomically
+from zendar_dataset.eval.report import prepare_out_dir, write_atomically
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.output_location import refuse_output_inside
 
@@ -178,6 +178,7 @@ def write_split(split: SemiSupervisedSplit, path: str | os.PathLike, *, dataset_
         refuse_output_inside(path, datasets=(dataset_root,), what="split file")
     content = split.to_json()
     document = {**content, "sha256": canonical_json_sha256(content)}
+    prepare_out_dir(path.parent)
     write_atomically(path, (json.dumps(document, indent=1, allow_nan=False) + "\n").encode("utf-8"))
     return path
 

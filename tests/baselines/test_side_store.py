@@ -266,6 +266,11 @@ def test_missing_store_and_missing_scene_are_named(dataset: Path, tmp_path: Path
     store = AutoLabelStore.create(tmp_path / "empty", dataset, PARAMETERS, code_version=CODE)
     with pytest.raises(AutoLabelStoreError, match="holds no labels of scene 'scene-0001'"):
         store.scene("scene-0001")
+    (tmp_path / "a-file").write_text("x")
+    with pytest.raises(AutoLabelStoreError, match="a-file/autolabels: cannot be created"):
+        AutoLabelStore.create(tmp_path / "a-file" / "autolabels", dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(AutoLabelStoreError, match="a-file: exists and is not a directory"):
+        AutoLabelStore.create(tmp_path / "a-file", dataset, PARAMETERS, code_version=CODE)
 
 
 def test_interrupted_run_leftovers_are_cleared(dataset: Path, tmp_path: Path) -> None:

@@ -62,7 +62,7 @@ def test_draw_is_a_seeded_generator_permutation(dataset: Path, document: dict) -
 
 def test_written_file_round_trips_with_canonical_checksum(dataset: Path, tmp_path: Path) -> None:
     split = make_split(dataset, 0.25, seed=3)
-    path = write_split(split, tmp_path / "split.json", dataset_root=dataset)
+    path = write_split(split, tmp_path / "runs" / "split.json", dataset_root=dataset)
     written = json.loads(path.read_text())
     assert written["format"] == "zendar-semisupervised-split" and written["format_version"] == 1
     content = {key: value for key, value in written.items() if key != "sha256"}
