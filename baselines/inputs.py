@@ -21,14 +21,14 @@ from torch.utils.data import Dataset
 
 from zendar_dataset.errors import ZendarError
 
+from zendar_baselines.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
+
 POWER_FLOOR = 1e-30
 """Added to |x|² before the logarithm: below any thermal noise power of the simulator (~1e-11) and
 the recorded data, it only keeps cells that are exactly zero (padding, a dead channel) finite."""
 
 DB_SCALE = 10.0
 """Divisor of the median-referenced map in dB: a target 40 dB above the noise floor becomes 4.0."""
-
-MASK_BACKGROUND, MASK_MOVING, MASK_UNCERTAIN = 0, 1, 2
 
 _CHUNK_FRAMES = 32
 
@@ -171,7 +171,7 @@ class MaskFrames(Dataset):
         _check_window(self.inputs, window, "MaskFrames")
         if getattr(self.targets, "ndim", None) != 3:
             raise ZendarError(f"MaskFrames: expected targets of shape [N, R, D], found shape {tuple(getattr(self.targets, 'shape', ()))}")
-        if self.targets.dtype != np.uint8:
+        if self.targets.dtype != MASK_DTYPE:
             raise ZendarError(f"MaskFrames: expected uint8 targets (0 background, 1 moving, 2 uncertain), found {self.targets.dtype}")
         if self.targets.shape[0] != self.inputs.shape[0] or self.targets.shape[1:] != self.inputs.shape[2:]:
             raise ZendarError(
@@ -200,8 +200,8 @@ class MaskFrames(Dataset):
         if not -len(self) <= index < len(self):
             raise IndexError(f"MaskFrames index {index} out of range for {len(self)} samples")
         index = index % len(self)
-        target = np.array(self.targets[index + self.window - 1], dtype=np.uint8)
-        if target.max(initial=0) > MASK_UNCERTAIN:
+        target = np.array(self.targets[index + self.window - 1], dtype=MASK_DTYPE)
+        if target.max(initial=0) > UNCERTAIN:
             raise ZendarError(
                 f"MaskFrames: mask of frame {index + self.window - 1} holds {int(target.max())}; "
                 "expected 0 background, 1 moving, 2 uncertain"
@@ -213,16 +213,13 @@ class MaskFrames(Dataset):
         background = moving = 0
         for start in range(self.window - 1, self.targets.shape[0], 256):
             block = np.asarray(self.targets[start : start + 256])
-            background += int(np.count_nonzero(block == MASK_BACKGROUND))
-            moving += int(np.count_nonzero(block == MASK_MOVING))
+            background += int(np.count_nonzero(block == BACKGROUND))
+            moving += int(np.count_nonzero(block == MOVING))
         return background, moving
 
 
 __all__ = [
     "DB_SCALE",
-    "MASK_BACKGROUND",
-    "MASK_MOVING",
-    "MASK_UNCERTAIN",
     "POWER_FLOOR",
     "MaskFrames",
     "log_power_maps",

@@ -51,7 +51,8 @@ from zendar_baselines.checkpoints import (
 )
 from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import Schedule
-from zendar_baselines.inputs import MASK_BACKGROUND, MASK_MOVING, MASK_UNCERTAIN, MaskFrames
+from zendar_baselines.inputs import MaskFrames
+from zendar_baselines.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 
 MAX_POS_WEIGHT = 100.0
 _CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")
@@ -103,11 +104,11 @@ def masked_bce(logits: torch.Tensor, targets: torch.Tensor, pos_weight: float) -
             f"masked_bce: logits {tuple(logits.shape)} do not fit targets {tuple(targets.shape)} "
             "(expected logits [B, 1, R, D] for targets [B, R, D])"
         )
-    labelled = targets != MASK_UNCERTAIN
+    labelled = targets != UNCERTAIN
     # Ignored cells are replaced before the loss, not multiplied by 0 after it: a non-finite logit
     # there (NaN · 0 = NaN) must reach neither the sum nor the gradient.
     logits = torch.where(labelled, logits[:, 0], torch.zeros((), dtype=logits.dtype, device=logits.device))
-    target_float = (targets == MASK_MOVING).to(logits.dtype)
+    target_float = (targets == MOVING).to(logits.dtype)
     per_cell = F.binary_cross_entropy_with_logits(
         logits, target_float, pos_weight=torch.tensor(pos_weight, dtype=logits.dtype, device=logits.device), reduction="none"
     )
@@ -124,8 +125,8 @@ def _mask_class_counts(data: Dataset) -> tuple[int, int]:
     background = moving = 0
     for index in range(len(data)):
         target = torch.as_tensor(data[index][1])
-        background += int((target == MASK_BACKGROUND).sum())
-        moving += int((target == MASK_MOVING).sum())
+        background += int((target == BACKGROUND).sum())
+        moving += int((target == MOVING).sum())
     return background, moving
 
 
