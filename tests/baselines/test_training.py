@@ -229,3 +229,20 @@ def test_predict_masks_is_the_sigmoid_of_the_logits():
         logits = model(torch.from_numpy(inputs))[:, 0].numpy()
     np.testing.assert_allclose(probabilities, 1 / (1 + np.exp(-logits)), rtol=1e-5, atol=1e-7)
     assert model.training
+
+
+def test_densenet_37_trains_and_comes_back_from_its_checkpoint(tmp_path, task_data):
+    from zendar_baselines.models import build_model
+
+    seed_everything(0)
+    model = build_model("densenet-37", in_channels=2, width_scale=0.25)
+    result = train(model, task_data, Schedule(lr=1e-3, batch_size=16, epochs=1), seed=0, out_dir=tmp_path, progress=False)
+    assert math.isfinite(result.epoch_losses[0])
+    rebuilt = build_model("densenet-37", in_channels=2, width_scale=0.25)
+    checkpoint = load_checkpoint(result.checkpoint_path, expected_architecture=rebuilt.architecture, model=rebuilt)
+    assert checkpoint["architecture"] == {"name": "densenet-37", "in_channels": 2, "width_scale": 0.25}
+    inputs, _ = moving_target_task(4, seed=9)
+    # Eval mode uses the batch-norm running statistics: equal outputs mean the buffers came back too.
+    np.testing.assert_array_equal(predict_masks(rebuilt, inputs, 4), predict_masks(model, inputs, 4))
+    with pytest.raises(ZendarError, match="densenet-67"):
+        load_checkpoint(result.checkpoint_path, expected_architecture={**rebuilt.architecture, "name": "densenet-67"})
