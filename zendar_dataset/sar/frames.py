@@ -7,6 +7,8 @@ grid given per frame by ``origin_ecef`` (the centre of pixel ``(0, 0)``) and the
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from zendar_dataset.format.reader import SceneReader
@@ -14,13 +16,17 @@ from zendar_dataset.format.reader import SceneReader
 # The SAR value of a point is the brightest pixel within this distance of its projection
 # (a DOA error of ~1 deg moves a point 0.25-1 m at 15-60 m).
 SAR_SEARCH_RADIUS_M = 0.5
+# Two radars' cubes straddle a SAR frame: one is read against the frame before, the other against
+# the frame after, so two frames per sensor are in use at a time.
+CACHED_FRAMES_PER_SENSOR = 2
 
 
 class SarFrames:
     """The SAR images of one scene and where ECEF points fall in them.
 
-    Images are read lazily; the dB image of the last frame visited per call is cached, as frames
-    are visited in time order.
+    Images are read lazily; the magnitudes of the frames visited last are kept
+    (:data:`CACHED_FRAMES_PER_SENSOR` per sensor, least recently used out), as frames are visited
+    in time order.
 
     Parameters
     ----------
@@ -47,7 +53,35 @@ class SarFrames:
         self.di = {s: reader.array(f"sar/{s}/di_ecef")[...] for s in self.sensors}
         self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
         self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
-        self._cache: dict[tuple[str, int], tuple[np.ndarray, float]] = {}
+        self._cache: OrderedDict[tuple[str, int], tuple[np.ndarray, float]] = OrderedDict()
+
+    def magnitude(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
+        """One image's magnitude and its median non-zero magnitude.
+
+        Parameters
+        ----------
+        sensor : str
+            SAR sensor name.
+        frame : int
+            Index into the sensor's frames.
+
+        Returns
+        -------
+        magnitude : numpy.ndarray
+            ``[H, W]`` ``|pixel|`` (float32 for a complex64 image).
+        floor : float
+            The median of the non-zero magnitudes (1.0 for an all-zero image), the dB reference.
+        """
+        key = (sensor, frame)
+        if key in self._cache:
+            self._cache.move_to_end(key)
+        else:
+            magnitude = np.abs(self.images[sensor][frame])
+            floor = float(np.median(magnitude[magnitude > 0])) if np.any(magnitude > 0) else 1.0
+            self._cache[key] = (magnitude, floor)
+            if len(self._cache) > CACHED_FRAMES_PER_SENSOR * max(1, len(self.sensors)):
+                self._cache.popitem(last=False)
+        return self._cache[key]
 
     def image_db(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
         """One image in dB over its median non-zero magnitude.
@@ -62,17 +96,12 @@ class SarFrames:
         Returns
         -------
         image_db : numpy.ndarray
-            ``[H, W]`` float64, ``20·log10(|pixel| / floor)``; pixels of magnitude 0 give about -600 dB.
+            ``[H, W]`` ``20·log10(|pixel| / floor)``; pixels of magnitude 0 give about -600 dB.
         floor : float
-            The median of the non-zero magnitudes (1.0 for an all-zero image), in the image's units.
+            The median of the non-zero magnitudes (:meth:`magnitude`), in the image's units.
         """
-        key = (sensor, frame)
-        if key not in self._cache:
-            self._cache.clear()  # frames are visited in order: keep one at most
-            magnitude = np.abs(self.images[sensor][frame])
-            floor = float(np.median(magnitude[magnitude > 0])) if np.any(magnitude > 0) else 1.0
-            self._cache[key] = (20.0 * np.log10(np.maximum(magnitude, 1e-30) / floor), floor)
-        return self._cache[key]
+        magnitude, floor = self.magnitude(sensor, frame)
+        return _to_db(magnitude, floor), floor
 
     def pixels(self, sensor: str, frame: int, points_ecef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where ECEF points project onto one image's plane.
@@ -121,18 +150,29 @@ class SarFrames:
         -------
         numpy.ndarray
             ``[P]`` float64 dB (:meth:`image_db`), the maximum over the pixels within
-            :data:`SAR_SEARCH_RADIUS_M` (a square window) of the nearest pixel; NaN for a point
-            outside the image.
+            :data:`SAR_SEARCH_RADIUS_M` (a square window, clipped at the image's border) of the
+            nearest pixel; NaN for a point outside the image.
         """
         ij, inside = self.pixels(sensor, frame, points_ecef)
         out = np.full(points_ecef.shape[0], np.nan)
         if not np.any(inside):
             return out
-        image_db, _floor = self.image_db(sensor, frame)
+        magnitude, floor = self.magnitude(sensor, frame)
         step = max(float(np.linalg.norm(self.di[sensor][frame])), 1e-6)
         k = max(0, int(round(SAR_SEARCH_RADIUS_M / step)))
-        height, width = image_db.shape
-        for p in np.flatnonzero(inside):
-            i, j = int(round(ij[p, 0])), int(round(ij[p, 1]))
-            out[p] = image_db[max(0, i - k) : min(height, i + k + 1), max(0, j - k) : min(width, j + k + 1)].max()
+        height, width = magnitude.shape
+        centre = np.rint(ij[inside]).astype(np.int64)
+        offsets = np.arange(-k, k + 1)
+        # Every window at once, [P, 2k+1, 2k+1]; clipping repeats border pixels, which leaves the
+        # maximum that of the clipped window. The maximum is taken on magnitudes and then turned
+        # into dB: the conversion is monotonic, so this equals the maximum of the dB image.
+        rows = np.clip(centre[:, 0, None, None] + offsets[None, :, None], 0, height - 1)
+        cols = np.clip(centre[:, 1, None, None] + offsets[None, None, :], 0, width - 1)
+        peak = magnitude[rows, cols].reshape(centre.shape[0], -1).max(axis=1)
+        out[inside] = _to_db(peak, floor)
         return out
+
+
+def _to_db(magnitude: np.ndarray, floor: float) -> np.ndarray:
+    """``20·log10(magnitude / floor)`` in the magnitude's precision, floored at 1e-30 (no -inf)."""
+    return 20.0 * np.log10(np.maximum(magnitude, 1e-30) / floor)
