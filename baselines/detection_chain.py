@@ -362,20 +362,24 @@ def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> li
     if not np.any(points.dynamic):
         return []
     labels = cluster_labels(points.points_xy, params.cluster_eps_m)
-    clusters = []
-    for label in np.unique(labels[points.dynamic]):
-        members = labels == label
-        moving = members & points.dynamic
-        weights = points.score[moving]
-        if not (np.all(np.isfinite(weights)) and weights.sum() > 0):
-            weights = np.ones(weights.shape)  # placement needs positive weights; an all-zero score still places
-        n_points, n_dynamic = int(members.sum()), int(moving.sum())
-        clusters.append(Cluster(
-            np.average(points.points_xy[moving], axis=0, weights=weights),
-            np.average(points.radar_xy[moving], axis=0, weights=weights),
-            float(points.score[moving].sum() * n_dynamic / n_points), n_points, n_dynamic,
-        ))
-    return clusters
+    n_clusters = int(labels.max()) + 1
+    moving = points.dynamic
+    n_points = np.bincount(labels, minlength=n_clusters)
+    n_dynamic = np.bincount(labels[moving], minlength=n_clusters)
+    score = np.bincount(labels[moving], weights=points.score[moving], minlength=n_clusters)
+    # Placement needs positive finite weights: a cluster whose scores are not falls back to equal ones.
+    finite = np.isfinite(points.score[moving])
+    usable = (np.bincount(labels[moving], weights=~finite, minlength=n_clusters) == 0) & (score > 0)
+    weights = np.where(usable[labels[moving]], np.where(finite, points.score[moving], 0.0), 1.0)
+    total = np.bincount(labels[moving], weights=weights, minlength=n_clusters)
+    centre = np.stack([np.bincount(labels[moving], weights=weights * points.points_xy[moving, axis], minlength=n_clusters)
+                       for axis in (0, 1)], axis=1)
+    radar = np.stack([np.bincount(labels[moving], weights=weights * points.radar_xy[moving, axis], minlength=n_clusters)
+                      for axis in (0, 1)], axis=1)
+    return [
+        Cluster(centre[c] / total[c], radar[c] / total[c], float(score[c] * n_dynamic[c] / n_points[c]), int(n_points[c]), int(n_dynamic[c]))
+        for c in np.flatnonzero(n_dynamic).tolist()
+    ]
 
 
 def frame_detections(points: FramePoints, params: ChainParams | None = None) -> list[dict[str, float]]:

@@ -16,7 +16,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.cluster import DBSCAN
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.radar import FmcwParams, detect, detections_to_points, estimate_azimuth
@@ -140,10 +142,20 @@ def moving_points(cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPo
 
 
 def cluster_labels(points_xy: np.ndarray, eps_m: float = CLUSTER_EPS_M) -> np.ndarray:
-    """``[N]`` int DBSCAN cluster of each point ``[N, 2]`` (metres), every point in one (min_samples=1)."""
-    if len(points_xy) == 0:
+    """``[N]`` int DBSCAN cluster of each point ``[N, 2]`` (metres), every point in one (min_samples=1).
+
+    With one sample per core point, DBSCAN's clusters are the connected components of the graph
+    joining points at most ``eps_m`` apart, numbered in order of their first point, as
+    ``sklearn.cluster.DBSCAN(eps=eps_m, min_samples=1)`` numbers them; a k-d tree finds the pairs
+    (a few times faster than DBSCAN's set-up for the hundreds of points of a frame).
+    """
+    points_xy = np.asarray(points_xy, np.float64)
+    n = len(points_xy)
+    if n == 0:
         return np.zeros(0, np.int64)
-    return DBSCAN(eps=eps_m, min_samples=1).fit_predict(points_xy)
+    pairs = cKDTree(points_xy).query_pairs(eps_m, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1].astype(np.int64)
 
 
 def cluster_cars(points_ego: np.ndarray, snr: np.ndarray) -> list[dict[str, float]]:
