@@ -39,7 +39,6 @@ from zendar_baselines.detection_chain import (
     to_frame,
 )
 from zendar_baselines.label_boxes import LabelBoxes
-from zendar_baselines.sar_test import SarTestParams
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
 from zendar_dataset.fidelity import ON_CAR_MARGIN_M

@@ -6,7 +6,8 @@ Per radar cube::
       -> DOA per cell -> points in the ego frame at the cube's time      cube_points
       -> SAR static-scene test per point                                 (zendar_baselines.sar_test)
 
-and per evaluator frame, with every radar's points moved into the frame's ego frame::
+and per evaluator frame, with every radar's points moved into the frame's ego frame (each point
+also moved along its line of sight by its radial velocity over the cube-to-frame time, :func:`to_frame`)::
 
       -> DBSCAN clusters of all points -> one detection per cluster      frame_detections
          holding dynamic points
@@ -24,8 +25,8 @@ of the car's centre along the line of sight. Each detection is pushed away from 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
 from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
