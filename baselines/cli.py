@@ -1,0 +1,109 @@
+"""Command line of ``zendar-bench``.
+
+    zendar-bench [--quick] [--config tiny|demo|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
+    zendar-bench verify [--out DIR] [--device cpu|cuda]
+
+Exit statuses as every command of the package: 0 done, 2 a problem with the user's files or
+arguments (one line, nothing lost), 1 an environment failure, 130 Ctrl-C (``zendar_dataset.cli.common``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from zendar_dataset.cli.common import run_cli
+from zendar_dataset.errors import ZendarError
+
+from zendar_baselines.configs import CONFIGS, get_config
+
+DEFAULT_OUT = "zendar-bench-out"
+DEFAULT_CONFIG = "demo"
+QUICK_CONFIG = "tiny"
+MAX_SEEDS = 100
+
+
+def _seeds(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of seeds, got {text!r}") from None
+    if not 1 <= value <= MAX_SEEDS:
+        raise argparse.ArgumentTypeError(f"expected 1 to {MAX_SEEDS} seeds, got {value}")
+    return value
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default=DEFAULT_OUT, help=f"run directory (default: ./{DEFAULT_OUT})")
+    parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="where the CNNs run (default: cpu)")
+
+
+def bench_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="zendar-bench",
+        description="Reproduce Table 1 of the paper: CFAR with the SAR mask, and FPN-ResNet-34 and zoom-out "
+        "DenseNet-37/-67 trained supervised-only and pretrained on automatic labels then fine-tuned; every row "
+        "scored on the test split by the official evaluator. Finished steps are reused, so an interrupted run "
+        "resumes. 'zendar-bench verify' re-scores a finished run from its checkpoints.",
+    )
+    parser.add_argument("--quick", action="store_true",
+                        help=f"a short run: the {QUICK_CONFIG} config unless --config is given, 1 seed unless --seeds is")
+    parser.add_argument("--config", choices=tuple(CONFIGS), default=None,
+                        help=f"training and data configuration (default: {DEFAULT_CONFIG}; with --quick: {QUICK_CONFIG})")
+    parser.add_argument("--data", default=None,
+                        help="dataset root to use, simulated there when absent (default: a cache directory under "
+                        "$XDG_CACHE_HOME/zendar-dataset/bench)")
+    parser.add_argument("--seeds", type=_seeds, default=None,
+                        help="training seeds per CNN row; mean and std over them (default: the config's; 1 with --quick)")
+    _common(parser)
+    return parser
+
+
+def verify_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="zendar-bench verify",
+        description="Re-score a finished run from its checkpoints and say whether every row reproduces its "
+        "recorded AP within the stated tolerance (exit 0 when all do, 1 when one does not).",
+    )
+    _common(parser)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["verify"]:
+        args = verify_parser().parse_args(argv[1:])
+        return run_cli(lambda: _verify(args))
+    args = bench_parser().parse_args(argv)
+    return run_cli(lambda: _bench(args))
+
+
+def _check_device(device: str) -> None:
+    if device == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise ZendarError("--device cuda: no CUDA device is available to torch here; use --device cpu")
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from zendar_baselines.bench import BenchOptions, run_bench
+
+    _check_device(args.device)
+    config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
+    seeds = args.seeds or (1 if args.quick else config.seeds)
+    options = BenchOptions(config=config, data=None if args.data is None else Path(args.data), out=Path(args.out),
+                           seeds=seeds, device=args.device)
+    run_bench(options)
+    print(f"wrote {Path(args.out) / 'table.md'}, table.csv, results.json, pr_*.png, bev.png and rows/")
+    return 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from zendar_baselines.verify import verify_run
+
+    _check_device(args.device)
+    report = verify_run(Path(args.out), args.device)
+    print(report.text)
+    return 0 if report.reproduced else 1

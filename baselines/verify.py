@@ -1,0 +1,88 @@
+"""``zendar-bench verify``: re-score a finished run from its checkpoints.
+
+Every CNN row's checkpoints are loaded (their SHA-256 manifest and architecture checked), the test
+split is predicted again and scored by the official evaluator; the CFAR row is recomputed from the
+cubes. A row reproduces when every band's AP is within :data:`AP_TOLERANCE` of what the run recorded.
+Inference is deterministic on one machine; the tolerance allows for another CPU's or a GPU's float
+rounding moving a few cells across the mask threshold.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval import evaluate
+
+from zendar_baselines.configs import BenchConfig, Schedule
+from zendar_baselines.run_directory import RUN_MARKER, read_json
+
+#: Largest |AP difference| per band (fraction) for a row to count as reproduced.
+AP_TOLERANCE = 0.01
+BANDS = ("near", "mid", "far", "all")
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """Outcome of :func:`verify_run`: ``reproduced`` for every row, and a readable ``text``."""
+
+    reproduced: bool
+    text: str
+
+
+def _config_from_json(document: dict) -> BenchConfig:
+    fields = dict(document)
+    for phase in ("pretrain", "finetune", "supervised"):
+        fields[phase] = Schedule(**fields[phase])
+    fields["models"] = tuple(fields["models"])
+    return BenchConfig(**fields)
+
+
+def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
+    """Re-score every row of the run in ``out``; see the module docstring.
+
+    Raises
+    ------
+    ZendarError
+        When ``out`` is not a finished zendar-bench run, or a checkpoint is missing or corrupt.
+    """
+    from zendar_baselines import pipeline
+
+    if not (out / RUN_MARKER).is_file() or not (out / "results.json").is_file():
+        raise ZendarError(f"--out {out}: not a finished zendar-bench run (no {RUN_MARKER} and results.json)")
+    results = read_json(out / "results.json")
+    try:
+        config = _config_from_json(results["config"])
+        root = Path(results["dataset"]["root"])
+        rows = results["rows"]
+    except (KeyError, TypeError) as exc:
+        raise ZendarError(f"{out / 'results.json'}: not a zendar-bench results file ({exc!r} missing)") from None
+    lines = [f"re-scoring {out} (tolerance {AP_TOLERANCE:g} AP per band)"]
+    all_reproduced = True
+    for row in rows:
+        key = row["key"]
+        seed_dirs = sorted((out / "rows" / key).glob("seed-*")) if key != "cfar" else [out / "rows" / key]
+        if not seed_dirs:
+            raise ZendarError(f"{out / 'rows' / key}: no seed directories to re-score")
+        for seed_dir in seed_dirs:
+            recorded = read_json(seed_dir / "metrics.json")["ap"]
+            if key == "cfar":
+                predictions = pipeline.cfar_predictions(root)
+            else:
+                predictions = pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), device)
+            again = evaluate(predictions, str(root), split="test")["ap"]
+            worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
+                        default=0.0)
+            same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
+            ok = same_bands and worst <= AP_TOLERANCE and not math.isnan(worst)
+            all_reproduced &= ok
+            shown = " ".join(f"{b} {_pct(recorded[b])}->{_pct(again[b])}" for b in BANDS)
+            lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")
+    lines.append("every row reproduces" if all_reproduced else "some rows do not reproduce within the tolerance")
+    return VerifyReport(all_reproduced, "\n".join(lines))
+
+
+def _pct(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.1f}"
