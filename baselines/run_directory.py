@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -100,6 +101,7 @@ class RunDirectory:
             except (OSError, UnicodeDecodeError, json.JSONDecodeError):
                 done = None
             if isinstance(done, dict) and done.get("key") == key:
+                print(f"[{name}] reused: done before with the same inputs", file=sys.stderr, flush=True)
                 return step_dir, key, True
             # Our own step made with other inputs: its files are stale, start it over.
             shutil.rmtree(step_dir)
