@@ -112,6 +112,7 @@ def synthesis_jobs(n_scenes: int) -> int:
 def run_bench(options: BenchOptions) -> dict[str, Any]:
     """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content."""
     started = time.monotonic()
+    RunDirectory.owner_record(options.out)
     root = ensure_dataset(options)
     config = options.config
     identity = {"config": config.name, "dataset": dataset_fingerprint(root)}

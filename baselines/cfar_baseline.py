@@ -12,7 +12,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from zendar_baselines.detection_chain import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, scene_poses, to_frame
+from zendar_baselines.detection_chain import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import open_dataset
 
@@ -53,7 +53,7 @@ def cfar_predictions(
     with tqdm(desc=f"CFAR baseline {split}", unit="frame", disable=not progress) as bar:
         for scene_id in scene_ids:
             with index.open_scene(scene_id) as reader:
-                poses = scene_poses(reader)
+                poses = reader.ego_poses()
                 for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
                     points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
                     results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)

@@ -35,7 +35,6 @@ from zendar_baselines.detection_chain import (
     frame_clusters,
     frame_cube_points,
     frame_detections,
-    scene_poses,
     to_frame,
 )
 from zendar_baselines.label_boxes import LabelBoxes
@@ -94,7 +93,7 @@ def labelled_frames(root: str | os.PathLike, split: str, params: ChainParams | N
             labels = reader.labels()
             if labels is None:
                 continue
-            poses = scene_poses(reader)
+            poses = reader.ego_poses()
             for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
                 boxes = LabelBoxes.of_frame(labels, frame_ns)
                 for cube in found:

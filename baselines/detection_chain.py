@@ -36,8 +36,6 @@ from zendar_dataset.classical_detector import CFAR_PFA, CLUSTER_EPS_M, cluster_l
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import SceneReader
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
-from zendar_dataset.geometry.geodesy import LocalENU
-from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.geometry.se3 import SE3
 from zendar_dataset.radar.cfar import cfar_2d, local_maxima
 from zendar_dataset.sar.frames import SarFrames
@@ -192,17 +190,6 @@ class FramePoints:
     def retested(self, sar: SarTestParams) -> FramePoints:
         """The same points with the SAR test's verdict under other settings."""
         return FramePoints(self.points_xy, self.radar_xy, self.score, self.sar_db, is_dynamic(self.sar_db, sar))
-
-
-def scene_poses(reader: SceneReader) -> EgoPoses:
-    """The scene's ego poses (tracklog, IMU calibration and ENU origin)."""
-    origin = reader.enu_origin
-    tracklog = PoseInterpolator(
-        reader.timestamps("tracklog"), reader.array("tracklog/position_ecef")[...], reader.array("tracklog/attitude_wxyz")[...]
-    )
-    return EgoPoses(
-        tracklog, ego_T_sensor(reader.calibration.sensors["imu"]), LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"])
-    )
 
 
 def cube_power(cube: np.ndarray) -> np.ndarray:
@@ -444,7 +431,7 @@ def frame_cube_points(
         processed once).
     """
     params = ChainParams() if params is None else params
-    poses = scene_poses(reader) if poses is None else poses
+    poses = reader.ego_poses() if poses is None else poses
     sar = SarFrames(reader) if sar is None else sar
     radars = reader.sensors("radar")
     cube_times = {radar: reader.timestamps(f"radar/{radar}") for radar in radars}

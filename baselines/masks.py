@@ -33,7 +33,6 @@ from zendar_baselines.detection_chain import (
     cube_points,
     cube_power,
     frame_timestamps,
-    scene_poses,
 )
 from zendar_baselines.label_boxes import LabelBoxes, nearest_label_frame
 from zendar_baselines.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
@@ -306,7 +305,7 @@ def scene_masks(
         frames_ns = frame_timestamps(reader)
     elif sar is None:
         sar = SarFrames(reader)
-    poses = scene_poses(reader)
+    poses = reader.ego_poses()
     calibration = reader.calibration.sensors[radar]
     timestamps = reader.timestamps(f"radar/{radar}")
     cubes = reader.array(f"radar/{radar}/cube")

@@ -28,7 +28,7 @@ from zendar_baselines import cfar_baseline
 from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import BenchConfig
 from zendar_baselines.detection_chain import (
-    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, mask_cells, scene_poses, to_frame,
+    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, mask_cells, to_frame,
 )
 from zendar_baselines.label_quality import combine_quality, format_quality, mask_quality
 from zendar_baselines.masks import MaskParams, scene_masks
@@ -248,7 +248,7 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
                         return mask_cells(np.zeros(cube.shape[:2]))
                     return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
 
-                poses = scene_poses(reader)
+                poses = reader.ego_poses()
                 for frame_ns, found in frame_cube_points(reader, cells_of, params, poses=poses):
                     points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
                     results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
@@ -279,7 +279,7 @@ def write_bev_figure(path: Path, root: Path, predictions: dict[str, Path]) -> Pa
         raise ZendarError(f"{root}: the test split has no labelled car to draw")
     _, scene_id, frame_ns = best
     with index.open_scene(scene_id) as reader:
-        poses = scene_poses(reader)
+        poses = reader.ego_poses()
         sar = SarFrames(reader)
         layers = []
         for sensor in sar.sensors:

@@ -59,29 +59,43 @@ class RunDirectory:
 
     def __init__(self, path: str | os.PathLike, identity: dict[str, Any]) -> None:
         self.path = Path(path)
-        marker = self.path / RUN_MARKER
-        if self.path.exists() and not self.path.is_dir():
-            raise ZendarError(f"--out {self.path}: exists and is not a directory")
+        recorded = self.owner_record(self.path)
+        if recorded is None:
+            prepare_out_dir(self.path)
+            write_json(self.path / RUN_MARKER, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
+        elif recorded.get("identity") != identity:
+            raise ZendarError(
+                f"--out {self.path} holds a zendar-bench run of {recorded.get('identity')}, not of {identity}; "
+                "choose another --out (nothing was changed)"
+            )
+        self.identity = identity
+
+    @staticmethod
+    def owner_record(path: Path) -> dict[str, Any] | None:
+        """The run record of ``path``, or None for a missing or empty directory.
+
+        Raises
+        ------
+        ZendarError
+            When ``path`` is a file, or holds files but no record of ours (checked before any work
+            starts, so that nothing is simulated or trained for an output that will be refused).
+        """
+        marker = path / RUN_MARKER
+        if path.exists() and not path.is_dir():
+            raise ZendarError(f"--out {path}: exists and is not a directory")
         if marker.is_file():
             recorded = read_json(marker)
             if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
                 raise ZendarError(f"{marker}: not a zendar-bench run record; choose another --out")
-            if recorded.get("identity") != identity:
-                raise ZendarError(
-                    f"--out {self.path} holds a zendar-bench run of {recorded.get('identity')}, not of {identity}; "
-                    "choose another --out (nothing was changed)"
-                )
-        elif self.path.is_dir() and any(self.path.iterdir()):
-            names = sorted(entry.name for entry in self.path.iterdir())
+            return recorded
+        if path.is_dir() and any(path.iterdir()):
+            names = sorted(entry.name for entry in path.iterdir())
             shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
             raise ZendarError(
-                f"--out {self.path} holds files that zendar-bench did not write ({shown}); "
+                f"--out {path} holds files that zendar-bench did not write ({shown}); "
                 "choose an empty or new directory (nothing was changed)"
             )
-        else:
-            prepare_out_dir(self.path)
-            write_json(marker, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
-        self.identity = identity
+        return None
 
     def step(self, name: str, inputs: dict[str, Any], compute: Callable[[Path], Any]) -> tuple[Path, str, bool]:
         """Run ``compute(step_dir)`` unless the step is done with the same inputs.

@@ -28,8 +28,8 @@ from zendar_dataset import shared_batches
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import SceneReader, StoredArray, frame_id, open_dataset
 from zendar_dataset.format.schema import LABEL_FIELD_NAMES
-from zendar_dataset.geometry import LocalENU, PoseInterpolator
-from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
+from zendar_dataset.geometry import PoseInterpolator
+from zendar_dataset.geometry.frames import EgoPoses
 from zendar_dataset.sync import (
     MISSING,
     SENSOR_GROUPS,
@@ -317,18 +317,8 @@ class ZendarDataset(Dataset):
     def _poses(self, scene: int) -> EgoPoses:
         state = self._scene_state(scene)
         if state.poses is None:
-            reader = self._readers[scene]
-            state.tracklog = PoseInterpolator(
-                reader.timestamps("tracklog"),
-                reader.array("tracklog/position_ecef")[...],
-                reader.array("tracklog/attitude_wxyz")[...],
-            )
-            origin = reader.enu_origin
-            state.poses = EgoPoses(
-                state.tracklog,
-                ego_T_sensor(reader.calibration.sensors["imu"]),
-                LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"]),
-            )
+            state.poses = self._readers[scene].ego_poses()
+            state.tracklog = state.poses.tracklog
         return state.poses
 
     def _array(self, scene: int, path: str) -> StoredArray:

@@ -37,9 +37,7 @@ from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.protocol import BANDS_M
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import SceneReader, open_dataset
-from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
-from zendar_dataset.geometry.geodesy import LocalENU
-from zendar_dataset.geometry.poses import PoseInterpolator
+from zendar_dataset.geometry.frames import ego_T_sensor
 from zendar_dataset.radar import FmcwParams
 from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.sim import ego as ego_model
@@ -108,14 +106,6 @@ def _simulation_truth(root: str) -> Callable[[str], Any] | None:
     return truth
 
 
-def _poses(reader: SceneReader) -> EgoPoses:
-    origin = reader.enu_origin
-    tracklog = PoseInterpolator(
-        reader.timestamps("tracklog"), reader.array("tracklog/position_ecef")[...], reader.array("tracklog/attitude_wxyz")[...]
-    )
-    return EgoPoses(tracklog, ego_T_sensor(reader.calibration.sensors["imu"]), LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"]))
-
-
 def _in_boxes(points_xy: np.ndarray, center: np.ndarray, length: np.ndarray, width: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """``[P, B]`` bool: points inside boxes grown by :data:`ON_CAR_MARGIN_M` (ego frame)."""
     delta = points_xy[:, None, :] - center[None, :, :]
@@ -132,7 +122,7 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
         return
     calibration = reader.calibration
     radars = reader.sensors("radar")
-    poses = _poses(reader)
+    poses = reader.ego_poses()
     radar_times = {r: reader.timestamps(f"radar/{r}") for r in radars}
     cubes = {r: reader.array(f"radar/{r}/cube") for r in radars}
     mounts = {r: ego_T_sensor(calibration.sensors[r]) for r in radars}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.baselines.chain_helpers import T0_NS, parked_poses, radar_calibration, radar_params, sar_frame, sar_frames, simulate_cube
-from zendar_baselines.detection_chain import ChainParams, scene_poses
+from zendar_baselines.detection_chain import ChainParams
 from zendar_baselines.label_boxes import LabelBoxes
 from zendar_baselines.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 from zendar_baselines.masks import MaskParams, auto_label_mask, grow_segments, scene_masks
@@ -120,7 +120,7 @@ def test_label_masks_mark_cells_that_map_back_inside_the_simulated_cars(tiny_roo
     truth = build_scene(PROFILES["tiny"], SEED, int(scene_id.split("-")[1]))
     params = MaskParams()
     with index.open_scene(scene_id) as reader:
-        poses = scene_poses(reader)
+        poses = reader.ego_poses()
         labels = reader.labels()
         inside, total = 0, 0
         for radar in reader.sensors("radar"):

@@ -28,6 +28,9 @@ from zendar_dataset.format.schema import (
     SENSOR_GROUPS,
     SPLITS,
 )
+from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
+from zendar_dataset.geometry.geodesy import LocalENU
+from zendar_dataset.geometry.poses import PoseInterpolator
 
 
 def _read_text(location: str, storage_options: dict | None) -> str:
@@ -578,6 +581,20 @@ class SceneReader:
             raise IndexError(f"{self.scene_id}: {stream}: frame {frame} out of range for {n} sweeps")
         frame %= n
         return self.array(f"{stream}/points")[offsets[frame] : offsets[frame + 1]]
+
+    def ego_poses(self) -> EgoPoses:
+        """The scene's ego pose at any time of its tracklog (IMU calibration and ENU origin applied).
+
+        Reads the whole tracklog; build it once per scene.
+        """
+        tracklog = PoseInterpolator(
+            self.timestamps("tracklog"), self.array("tracklog/position_ecef")[...], self.array("tracklog/attitude_wxyz")[...]
+        )
+        origin = self.enu_origin
+        return EgoPoses(
+            tracklog, ego_T_sensor(self.calibration.sensors["imu"]),
+            LocalENU(origin["lat_deg"], origin["lon_deg"], origin["height_m"]),
+        )
 
     def labels(self) -> dict[str, np.ndarray] | None:
         """Every field of ``labels/moving_cars`` as 1-D arrays, or None when labels are withheld."""
