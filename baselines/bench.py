@@ -126,7 +126,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     say(f"[split] {len(split.labelled)} labelled / {len(split.unlabelled)} unlabelled training scenes")
 
     auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "split": split_key},
-                                     lambda d: pipeline.write_auto_labels(root, split, d))
+                                     lambda d: pipeline.write_auto_labels(root, [*split.labelled, *split.unlabelled], d))
     quality = read_json(auto_dir / "quality.json")
     say("[autolabels] quality against the manual labels of the training scenes:\n" + quality["table"])
 

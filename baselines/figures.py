@@ -39,7 +39,7 @@ def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) ->
         A key of ``BANDS_M``.
     """
     low_m, high_m = BANDS_M[band]
-    figure = Figure(figsize=(6.4, 5.6), dpi=100, layout="constrained")
+    figure = Figure(figsize=(10.0, 5.2), dpi=100, layout="constrained")
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     for index, (label, metrics) in enumerate(curves):
@@ -58,7 +58,7 @@ def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) ->
     axes.set_ylabel("precision (envelope)")
     axes.set_title(f"moving cars, {band} [{low_m:g}, {high_m:g}) m", fontsize=10)
     axes.grid(alpha=0.3)
-    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, frameon=False, fontsize=8)
+    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), ncol=1, frameon=False, fontsize=8)
     return figure
 
 
@@ -94,7 +94,7 @@ def bev_figure(
     extent_m
         Half-width of the view; the evaluator's bands end at 60 m.
     """
-    figure = Figure(figsize=(8.0, 7.6), dpi=100, layout="constrained")
+    figure = Figure(figsize=(13.0, 7.5), dpi=100, layout="constrained")
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     mesh = None
@@ -103,7 +103,7 @@ def bev_figure(
         mesh = axes.pcolormesh(-xy_ego[..., 1], xy_ego[..., 0], image_db, cmap="gray", vmin=-10.0, vmax=30.0,
                                shading="nearest", rasterized=True)
     if mesh is not None:
-        figure.colorbar(mesh, ax=axes, label="SAR, dB over the image median", shrink=0.7)
+        figure.colorbar(mesh, ax=axes, label="SAR, dB over the image median", location="left", shrink=0.6)
     for radius in (15.0, 30.0, 60.0):
         angle = np.linspace(-np.pi, np.pi, 256)
         axes.plot(radius * np.sin(angle), radius * np.cos(angle), color="0.6", linewidth=0.6, linestyle=":")
@@ -125,7 +125,7 @@ def bev_figure(
     axes.set_xlabel("-y (left of the ego is to the left), m")
     axes.set_ylabel("x (forward), m")
     axes.set_title(title, fontsize=10)
-    axes.legend(loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=3, frameon=False, fontsize=8)
+    axes.legend(loc="center left", bbox_to_anchor=(1.02, 0.5), ncol=1, frameon=False, fontsize=8)
     return figure
 
 

@@ -73,30 +73,40 @@ def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
     return range_axis_m(n_range, params.range_bin_m)
 
 
-def write_auto_labels(root: Path, split: SemiSupervisedSplit, step_dir: Path) -> None:
-    """Automatic masks of every training scene (side store) and their quality against the manual labels.
+def write_auto_labels(root: Path, scene_ids: list[str], out_dir: Path, *, quality: bool = True) -> dict[str, Any] | None:
+    """Automatic masks of ``scene_ids`` (a side store in ``out_dir / "store"``) and their quality.
 
-    The quality figures read the manual labels of every training scene: they describe the labels,
-    feed no model and choose nothing.
+    With ``quality``, every scene's masks are also measured against its manual-label masks and the
+    pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
+    labels, feed no model and choose nothing, so they may read the manual labels of any scene.
+
+    Raises
+    ------
+    ZendarError
+        For ``quality`` on a scene without labels, or a store of another dataset in ``out_dir``.
     """
     index = open_dataset(str(root))
     parameters = mask_parameters()
-    store = AutoLabelStore.create(step_dir / STORE_DIR, root, parameters, code_version=code_version())
+    store = AutoLabelStore.create(out_dir / STORE_DIR, root, parameters, code_version=code_version())
     scores = []
-    scenes = sorted((*split.labelled, *split.unlabelled))
-    for scene_id in tqdm(scenes, desc="automatic labels", unit="scene"):
+    for scene_id in tqdm(sorted(scene_ids), desc="automatic labels", unit="scene"):
         with index.open_scene(scene_id) as reader:
-            sar = SarFrames(reader)
             if store.has_scene(scene_id, parameters, code_version()):
                 auto = store.scene(scene_id)
             else:
+                sar = SarFrames(reader)
                 auto = {radar: scene_masks(reader, radar, "auto", sar=sar, progress=False) for radar in reader.sensors("radar")}
                 store.write_scene(scene_id, auto)
-            for radar, (_, auto_masks) in auto.items():
-                _, label_masks = scene_masks(reader, radar, "labels", progress=False)
-                scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
-    quality = combine_quality(scores)
-    write_json(step_dir / "quality.json", {"quality": quality, "table": format_quality(quality)})
+            if quality:
+                for radar, (_, auto_masks) in auto.items():
+                    _, label_masks = scene_masks(reader, radar, "labels", progress=False)
+                    scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
+    if not quality:
+        return None
+    pooled = combine_quality(scores)
+    document = {"quality": pooled, "table": format_quality(pooled)}
+    write_json(out_dir / "quality.json", document)
+    return document
 
 
 def write_label_masks(root: Path, split: SemiSupervisedSplit, step_dir: Path) -> None:

@@ -1,0 +1,191 @@
+"""``zendar-bench`` as a user runs it: the quick table end to end, resume, verify, and every refusal.
+
+The quick run (tiny config, one seed) takes about two and a half minutes on 2 cores; it runs once per
+session and the other tests read its outputs.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from zendar_dataset.sim.generate import synthesize_dataset
+
+pytestmark = pytest.mark.slow
+
+ROWS = [
+    ("CFAR", False, False),
+    ("FPN ResNet-34", False, True),
+    ("FPN ResNet-34", True, True),
+    ("zoom-out DenseNet-37", False, True),
+    ("zoom-out DenseNet-37", True, True),
+    ("zoom-out DenseNet-67", False, True),
+    ("zoom-out DenseNet-67", True, True),
+]
+BANDS = ("near", "mid", "far", "all")
+
+
+def bench(*args: str, env_home: Path, timeout: int = 900) -> subprocess.CompletedProcess:
+    env = {**os.environ, "XDG_CACHE_HOME": str(env_home / "cache")}
+    env.pop("ZENDAR_DEBUG", None)
+    return subprocess.run(["zendar-bench", *args], capture_output=True, text=True, timeout=timeout, env=env,
+                          cwd=env_home)
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    home = tmp_path_factory.mktemp("bench")
+    done = bench("--quick", "--out", str(home / "out"), env_home=home)
+    return home, done
+
+
+def test_quick_bench_writes_table_one(quick_run):
+    home, done = quick_run
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "Traceback" not in done.stderr
+    out = home / "out"
+    # The dataset was simulated into the cache, never into the working directory.
+    assert (home / "cache" / "zendar-dataset" / "bench").is_dir()
+    results = json.loads((out / "results.json").read_text())
+    assert [(r["method"], r["unsupervised"], r["supervised"]) for r in results["rows"]] == ROWS
+    for row in results["rows"]:
+        assert set(row["ap"]) == set(BANDS)
+        for band in BANDS:
+            assert row["ap"][band] is None or 0.0 <= row["ap"][band] <= 1.0
+        metrics = json.loads((out / row["metrics"]).read_text())
+        assert metrics["split"] == "test" and metrics["ap"]["all"] == pytest.approx(row["ap"]["all"], abs=1e-4)
+        assert "bootstrap" in metrics  # the evaluator's 95 % interval per row
+        predictions = json.loads((out / row["predictions"]).read_text())
+        assert len(predictions["results"]) == metrics["n_frames"]
+    assert set(results["claims"]) == {"cnn_beats_cfar", "pretraining_helps", "ap_falls_with_range"}
+    table = (out / "table.md").read_text()
+    assert "| CFAR | - | - |" in table and "| 65.0 | 43.0 | 13.3 |" in table  # ours beside the paper's
+    with open(out / "table.csv", newline="") as handle:
+        assert [line["method"] for line in csv.DictReader(handle)] == [method for method, _, _ in ROWS]
+    for picture in ("pr_near.png", "pr_mid.png", "pr_far.png", "pr_all.png", "bev.png"):
+        assert (out / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    quality = json.loads((out / "autolabel_quality.json").read_text())
+    assert set(quality["bands"]) == set(BANDS) and quality["n_frames"] > 0
+
+
+def test_the_split_never_shows_unlabelled_scenes_labels(quick_run):
+    home, _ = quick_run
+    out = home / "out"
+    split = json.loads((out / "split" / "split.json").read_text())
+    label_store = json.loads((out / "label_masks" / "store" / "manifest.json").read_text())
+    assert sorted(label_store["scenes"]) == sorted(split["labelled"])
+    assert not set(split["labelled"]) & set(split["unlabelled"])
+
+
+def test_a_second_run_reuses_every_step_and_gives_the_same_table(quick_run):
+    home, first = quick_run
+    before = (home / "out" / "table.md").read_text()
+    again = bench("--quick", "--out", str(home / "out"), env_home=home)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "epoch" not in again.stderr  # nothing trained again
+    assert again.stderr.count("reused") >= 1 + 1 + 1 + 1 + 6
+    assert (home / "out" / "table.md").read_text() == before
+
+
+def test_verify_rescores_from_the_checkpoints(quick_run):
+    home, _ = quick_run
+    done = bench("verify", "--out", str(home / "out"), env_home=home)
+    assert done.returncode == 0, done.stdout + done.stderr[-2000:]
+    assert "every row reproduces" in done.stdout
+
+
+def test_verify_names_a_damaged_checkpoint(quick_run, tmp_path):
+    home, _ = quick_run
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-a", str(home / "out"), str(copy)], check=True)
+    seed_dir = copy / "rows" / "densenet-37-supervised" / "seed-0"
+    checkpoint = seed_dir / json.loads((seed_dir / "checkpoint.json").read_text())["checkpoint"]
+    data = bytearray(checkpoint.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    checkpoint.write_bytes(bytes(data))
+    done = bench("verify", "--out", str(copy), env_home=home)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert checkpoint.name in done.stderr
+
+
+def test_an_out_holding_someone_elses_files_is_refused_untouched(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    done = bench("--quick", "--out", str(out), env_home=tmp_path, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "holds files that zendar-bench did not write (notes.txt)" in done.stderr
+    assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "mine"
+    assert not (tmp_path / "cache").exists()  # refused before simulating anything
+
+
+def test_a_run_of_another_config_is_refused(quick_run):
+    home, _ = quick_run
+    done = bench("--config", "demo", "--out", str(home / "out"), env_home=home, timeout=120)
+    assert done.returncode == 2 and "holds a zendar-bench run of" in done.stderr
+
+
+def test_a_dataset_without_test_labels_is_refused(tmp_path):
+    data = tmp_path / "withheld"
+    synthesize_dataset(data, profile="tiny", n_scenes=5, withhold_test_labels=True, progress=False)
+    done = bench("--quick", "--data", str(data), "--out", str(tmp_path / "out"), env_home=tmp_path, timeout=300)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "has no labels" in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--seeds", "0"], "expected 1 to 100 seeds"),
+        (["--seeds", "three"], "expected a whole number of seeds"),
+        (["--config", "huge"], "invalid choice: 'huge'"),
+        (["--device", "tpu"], "invalid choice: 'tpu'"),
+    ],
+)
+def test_bad_arguments_exit_2_with_the_reason(tmp_path, args, message):
+    done = bench(*args, "--out", str(tmp_path / "out"), env_home=tmp_path, timeout=60)
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="checks torch's CUDA probe on the CI machines")
+def test_cuda_without_a_device_is_a_clear_refusal(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA device is present")
+    done = bench("--quick", "--device", "cuda", "--out", str(tmp_path / "out"), env_home=tmp_path, timeout=60)
+    assert done.returncode == 2 and "no CUDA device" in done.stderr
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("small") / "data"
+    synthesize_dataset(root, profile="tiny", n_scenes=4, progress=False)
+    return root
+
+
+def test_autolabels_command_writes_a_side_store_with_its_quality(small_dataset, tmp_path):
+    out = tmp_path / "labels"
+    done = bench("autolabels", str(small_dataset), "--out", str(out), env_home=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    manifest = json.loads((out / "store" / "manifest.json").read_text())
+    train = json.loads((small_dataset / "dataset.json").read_text())["splits"]["train"]
+    assert manifest["format"] == "zendar-autolabels" and sorted(manifest["scenes"]) == sorted(train)
+    assert "cell P" in done.stdout and "near" in done.stdout
+    quality = json.loads((out / "quality.json").read_text())["quality"]
+    assert 0.0 <= quality["bands"]["all"]["cell_precision"] <= 1.0
+    again = bench("autolabels", str(small_dataset), "--out", str(out), env_home=tmp_path, timeout=300)
+    assert again.returncode == 0 and json.loads((out / "store" / "manifest.json").read_text())["scenes"] == manifest["scenes"]
+
+
+def test_autolabels_are_never_written_inside_the_dataset(small_dataset, tmp_path):
+    before = sorted(p.relative_to(small_dataset) for p in small_dataset.rglob("*"))
+    done = bench("autolabels", str(small_dataset), "--out", str(small_dataset / "labels"), env_home=tmp_path, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert sorted(p.relative_to(small_dataset) for p in small_dataset.rglob("*")) == before
