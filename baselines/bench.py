@@ -112,9 +112,9 @@ def synthesis_jobs(n_scenes: int) -> int:
 def run_bench(options: BenchOptions) -> dict[str, Any]:
     """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content."""
     started = time.monotonic()
-    RunDirectory.owner_record(options.out)
-    root = ensure_dataset(options)
     config = options.config
+    RunDirectory.check_owner(options.out, {"config": config.name})
+    root = ensure_dataset(options)
     identity = {"config": config.name, "dataset": dataset_fingerprint(root)}
     run = RunDirectory(options.out, identity)
     base_inputs = {"config": config.to_json(), "dataset": identity["dataset"], "code_version": code_version()}

@@ -59,16 +59,27 @@ class RunDirectory:
 
     def __init__(self, path: str | os.PathLike, identity: dict[str, Any]) -> None:
         self.path = Path(path)
-        recorded = self.owner_record(self.path)
-        if recorded is None:
+        if self.check_owner(self.path, identity) is None:
             prepare_out_dir(self.path)
             write_json(self.path / RUN_MARKER, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
-        elif recorded.get("identity") != identity:
-            raise ZendarError(
-                f"--out {self.path} holds a zendar-bench run of {recorded.get('identity')}, not of {identity}; "
-                "choose another --out (nothing was changed)"
-            )
         self.identity = identity
+
+    @classmethod
+    def check_owner(cls, path: Path, identity: dict[str, Any]) -> dict[str, Any] | None:
+        """:meth:`owner_record`, refusing a run whose identity differs from ``identity`` in any key it gives.
+
+        Called with part of the identity (the configuration) before any work starts, and with all
+        of it once the dataset is known.
+        """
+        recorded = cls.owner_record(path)
+        if recorded is not None:
+            theirs = recorded.get("identity")
+            if not isinstance(theirs, dict) or any(theirs.get(key) != value for key, value in identity.items()):
+                raise ZendarError(
+                    f"--out {path} holds a zendar-bench run of {theirs}, not of {identity}; "
+                    "choose another --out (nothing was changed)"
+                )
+        return recorded
 
     @staticmethod
     def owner_record(path: Path) -> dict[str, Any] | None:
