@@ -13,7 +13,7 @@ Per architecture and configuration:
   batch (8 frames demo, 2 frames paper), after a warm-up step.
 
 Configurations: ``demo`` is 12 input channels (3 stacked maps x 4 antennas) of 256 range x 64
-Doppler bins at width_scale 0.25; ``paper`` is 12 channels of 512 x 256 at the published widths.
+Doppler bins at the demo config's width_scale (0.125); ``paper`` is 12 channels of 512 x 256 at the published widths.
 The paper size on a CPU gets fewer repeats (its batch-8 inference once, after the batch-1 warm-up),
 so its spread says little. There is no peer row: no published implementation of these detectors
 exists to compare with. Threads: torch intra-op threads, printed (``--threads`` to change); on a
@@ -30,6 +30,7 @@ import torch
 import torch.nn.functional as F
 from harness import Spread, print_environment, print_load_after, time_calls
 
+from zendar_baselines.configs import get_config
 from zendar_baselines.models import MODEL_NAMES, build_model, parameter_count
 
 
@@ -54,9 +55,10 @@ INFERENCE_BATCHES = (1, 8)
 def settings(device: str) -> dict[str, Setting]:
     """The demo and paper settings; the paper size on a CPU gets the fewest repeats that still time it."""
     paper_repeats = (2, 1, 1) if device == "cpu" else (20, 10, 10)
+    demo, paper = get_config("demo"), get_config("paper")
     return {
-        "demo": Setting("demo", 12, 256, 64, 0.25, 8, 10, 5, 5),
-        "paper": Setting("paper", 12, 512, 256, 1.0, 2, *paper_repeats),
+        "demo": Setting("demo", demo.window * 4, 256, 64, demo.width_scale, 8, 10, 5, 5),
+        "paper": Setting("paper", paper.window * 4, 512, 256, paper.width_scale, 2, *paper_repeats),
     }
 
 
