@@ -1,7 +1,7 @@
 """``zendar-bench`` as a user runs it: the quick table end to end, resume, verify, and every refusal.
 
 The quick run (tiny config, one seed) takes about two and a half minutes on 2 cores; it runs once per
-session and the other tests read its outputs.
+test module and the other tests read its outputs.
 """
 
 from __future__ import annotations
