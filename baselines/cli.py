@@ -114,8 +114,8 @@ def _bench(args: argparse.Namespace) -> int:
     _check_device(args.device)
     config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
     seeds = args.seeds or (1 if args.quick else config.seeds)
-    options = BenchOptions(config=config, data=None if args.data is None else Path(args.data).absolute(), out=Path(args.out),
-                           seeds=seeds, device=args.device)
+    data = None if args.data is None else Path(args.data).absolute()
+    options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device)
     run_bench(options)
     print(f"wrote {Path(args.out) / 'table.md'}, table.csv, results.json, pr_*.png, bev.png and rows/")
     return 0
