@@ -231,15 +231,15 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
     :data:`MASK_THRESHOLD`, score = probability) are placed by DOA, put to the SAR test and
     clustered with the other radar's points of the frame.
     """
-    from zendar_baselines.checkpoints import load_checkpoint
+    from zendar_baselines.checkpoints import load_checkpoint, load_model_state
     from zendar_baselines.inputs import log_power_maps, stack_window
     from zendar_baselines.models import build_model
     from zendar_baselines.training import predict_masks
 
-    stored = load_checkpoint(checkpoint)
+    stored = load_checkpoint(checkpoint)  # SHA-256 against the manifest, once
     architecture = stored["architecture"]
     model = build_model(architecture["name"], architecture["in_channels"], architecture["width_scale"])
-    load_checkpoint(checkpoint, architecture, model=model)
+    load_model_state(model, stored, checkpoint)
     model.to(device)
     params = ChainParams() if params is None else params
     window = config.window
