@@ -189,3 +189,9 @@ def test_autolabels_are_never_written_inside_the_dataset(small_dataset, tmp_path
     done = bench("autolabels", str(small_dataset), "--out", str(small_dataset / "labels"), env_home=tmp_path, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert sorted(p.relative_to(small_dataset) for p in small_dataset.rglob("*")) == before
+
+
+def test_verify_of_a_directory_that_is_not_a_run_is_refused(tmp_path):
+    (tmp_path / "out").mkdir()
+    done = bench("verify", "--out", str(tmp_path / "out"), env_home=tmp_path, timeout=60)
+    assert done.returncode == 2 and "not a finished zendar-bench run" in done.stderr and "Traceback" not in done.stderr
