@@ -147,3 +147,29 @@ def test_split_ratios_assign_every_scene_once():
     assert sorted(sum(splits.values(), [])) == [f"scene-{i:04d}" for i in range(10)]
     with pytest.raises(ZendarError):
         split_scene_ids(3, (1.0, -1.0, 0.0))
+
+
+def test_duration_option_shortens_scenes_is_recorded_and_is_part_of_the_resume_key(tmp_path, capsys):
+    from zendar_dataset.cli.data import main
+    from zendar_dataset.format import open_dataset
+
+    out = tmp_path / "short"
+    assert main(["synth", str(out), "--profile", "tiny", "--scenes", "1", "--duration-s", "0.5", "--quiet"]) == 0
+    recorded = json.loads((out / "simulation.json").read_text())["profile"]
+    assert recorded["scene_duration_s"] == 0.5
+    assert "0.5 s scenes instead of the profile's 1 s" in recorded["reductions"]
+    with open_dataset(out).open_scene("scene-0000") as scene:
+        # SAR frames come at 10 Hz from half a period in: 0.05, 0.15, ..., 0.45 s.
+        sar_ns = scene.timestamps("sar/front_left")
+        radar_ns = [scene.timestamps(f"radar/{s}") for s in ("front_left", "front_right")]
+    assert len(sar_ns) == 5 and np.allclose(np.diff(sar_ns), 1e8)
+    assert (max(int(r[-1]) for r in radar_ns) - min(int(r[0]) for r in radar_ns)) / 1e9 < 0.5
+    capsys.readouterr()
+    # Resuming with another length is another dataset: refused, nothing changed.
+    before = _files(out)
+    assert main(["synth", str(out), "--profile", "tiny", "--scenes", "1", "--quiet"]) == 2
+    assert "other settings" in capsys.readouterr().err and _files(out) == before
+    for bad in ("0.2", "nan", "-1", "inf"):
+        assert main(["synth", str(tmp_path / f"bad{bad}"), "--profile", "tiny", "--duration-s", bad, "--quiet"]) == 2
+        assert "scene duration" in capsys.readouterr().err
+        assert not (tmp_path / f"bad{bad}").exists()

@@ -47,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--profile", choices=sorted(PROFILES), default="demo", help="size of the simulation (default: demo)")
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the profile's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument("--duration-s", type=float, default=None, metavar="SECONDS",
+                        help="length of each scene (default: the profile's; at least 0.5); recorded with the "
+                        "profile in OUT/simulation.json")
     parser.add_argument("--split-ratios", type=_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
     parser.add_argument("--withhold-test-labels", action="store_true",
@@ -55,6 +58,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes, one scene each at a time (default: the usable CPUs, at most the "
                         "scenes left, but 1 for fewer scenes than twice the CPUs, where workers cost more than "
                         "they save; 1 = in this process); the output does not depend on it")
+    parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                        help="where SAR images are backprojected: cpu (numba kernel, default) or cuda (torch on the "
+                        "GPU: the same sum, equal to rounding; recorded in OUT/simulation.json)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 
@@ -67,11 +73,14 @@ def _run(args: argparse.Namespace) -> int:
         raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
     if args.jobs is not None and args.jobs < 1:
         raise ZendarError(f"--jobs must be at least 1, got {args.jobs}")
-    n_scenes = get_profile(args.profile).default_scenes if args.scenes is None else args.scenes
+    profile = get_profile(args.profile)
+    if args.duration_s is not None:
+        profile = profile.with_duration(args.duration_s)
+    n_scenes = profile.default_scenes if args.scenes is None else args.scenes
     with writing(args.out):
         out = synthesize_dataset(
             args.out,
-            profile=args.profile,
+            profile=profile,
             n_scenes=args.scenes,
             seed=args.seed,
             split_ratios=args.split_ratios,
@@ -79,6 +88,7 @@ def _run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             withhold_test_labels=args.withhold_test_labels,
             jobs=default_jobs(n_scenes) if args.jobs is None else args.jobs,
+            sar_device=args.device,
         )
     print(f"wrote {out}")
     return 0

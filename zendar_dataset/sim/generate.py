@@ -59,8 +59,9 @@ def split_scene_ids(n_scenes: int, split_ratios: tuple[float, float, float]) -> 
     return {"train": ids[:n_train], "val": ids[n_train : n_train + n_val], "test": ids[n_train + n_val :]}
 
 
-def _settings(profile: SimProfile, n_scenes: int, seed: int, split_ratios, backend: str, withhold: bool) -> dict:
-    return {
+def _settings(profile: SimProfile, n_scenes: int, seed: int, split_ratios, backend: str, withhold: bool,
+              sar_device: str | None) -> dict:
+    settings = {
         "generator": "zendar_dataset.sim",
         "profile": profile.to_json(),
         "scenes": int(n_scenes),
@@ -69,6 +70,34 @@ def _settings(profile: SimProfile, n_scenes: int, seed: int, split_ratios, backe
         "backend": backend,
         "withhold_test_labels": bool(withhold),
     }
+    # Recorded only off the default, so records written before the option existed still resume:
+    # another backend rounds differently, and one dataset should not mix the two.
+    if sar_device is not None:
+        settings["sar_device"] = sar_device
+    return settings
+
+
+def check_sar_device(device: str | None) -> str | None:
+    """``None`` for the numba kernel (``None`` or ``"cpu"``), else a CUDA device name that torch can use.
+
+    Raises
+    ------
+    ZendarError
+        For anything else, or CUDA without a usable device.
+    """
+    if device is None or device == "cpu":
+        return None
+    if not (isinstance(device, str) and (device == "cuda" or device.startswith("cuda:"))):
+        raise ZendarError(f"SAR device must be 'cpu' or 'cuda' (or 'cuda:N'), got {device!r}")
+    import torch
+
+    try:
+        usable = torch.cuda.is_available() and torch.device(device).index in (None, *range(torch.cuda.device_count()))
+    except RuntimeError:
+        usable = False
+    if not usable:
+        raise ZendarError(f"SAR device {device!r}: torch sees no such CUDA device on this machine")
+    return device
 
 
 def _prepare_output(out: pathlib.Path, settings: dict) -> None:
@@ -127,6 +156,7 @@ def synthesize_dataset(
     progress: bool = True,
     withhold_test_labels: bool = False,
     jobs: int = 1,
+    sar_device: str | None = None,
 ) -> pathlib.Path:
     """Write a synthetic dataset to ``out`` (or finish an interrupted one).
 
@@ -153,6 +183,10 @@ def synthesize_dataset(
         threads are capped so that ``jobs * threads`` does not exceed the usable
         CPUs. Workers are started with ``spawn``, which re-runs the main script:
         from a script, call with ``jobs > 1`` under ``if __name__ == "__main__":``.
+    sar_device : {None, "cpu", "cuda", "cuda:N"}
+        Where SAR images are backprojected: the numba kernel on the CPU (``None``, ``"cpu"``) or
+        the torch backend on a GPU, which computes the same float32 sum (equal to rounding, so
+        not byte-identical to a CPU run; a GPU run is recorded in ``simulation.json``).
 
     Returns
     -------
@@ -182,17 +216,19 @@ def synthesize_dataset(
     if isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 1:
         raise ZendarError(f"jobs must be a positive integer, got {jobs!r}")
     jobs = int(jobs)
+    sar_device = check_sar_device(sar_device)
     if jobs > 1:
         _refuse_unguarded_main(jobs)
     splits = split_scene_ids(n_scenes, split_ratios)
     out = pathlib.Path(out)
-    _prepare_output(out, _settings(profile, n_scenes, seed, split_ratios, backend, withhold_test_labels))
+    _prepare_output(out, _settings(profile, n_scenes, seed, split_ratios, backend, withhold_test_labels, sar_device))
     _remove_interrupted(out)
     writer = DatasetWriter(out, f"zendar-sim-{profile.name}", backend=backend, overwrite=True)
     test_ids = set(splits["test"])
     todo = []
     for index in range(n_scenes):
-        task = _SceneTask(out, profile, seed, backend, index, withhold_test_labels and f"scene-{index:04d}" in test_ids)
+        task = _SceneTask(out, profile, seed, backend, index, withhold_test_labels and f"scene-{index:04d}" in test_ids,
+                          sar_device)
         if not task.is_complete(writer):
             todo.append(task)
     bar = tqdm(total=n_scenes, initial=n_scenes - len(todo), desc=f"synth {profile.name}", unit="scene", disable=not progress)
@@ -224,6 +260,7 @@ class _SceneTask:
     backend: str
     index: int
     withhold: bool
+    sar_device: str | None = None
 
     @property
     def scene_id(self) -> str:
@@ -246,7 +283,8 @@ class _SceneTask:
         # (interrupted between the two writes): simulate it again to get the labels.
         rewrite = writer.scene_path(self.scene_id).exists()
         with writer.scene(self.scene_id, enu_origin=origin, calibration=calibration, overwrite=rewrite) as scene:
-            labels = write_scene(scene, truth, profile, self.seed, self.index, with_labels=not self.withhold)
+            labels = write_scene(scene, truth, profile, self.seed, self.index, with_labels=not self.withhold,
+                                 sar_device=self.sar_device)
         if self.withhold:
             self.gt_path.parent.mkdir(exist_ok=True)
             write_json_atomic(self.gt_path, _frames(self.scene_id, labels, truth, profile))

@@ -11,11 +11,15 @@ docs/simulator.md and in each profile's ``reductions``.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
 from zendar_dataset.sim.imperfections import Imperfections
+
+
+# Five frames of the 10 Hz streams: shorter scenes can leave a free-running stream empty.
+MIN_SCENE_DURATION_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,24 @@ class SimProfile:
     def sample_rate_hz(self) -> float:
         """Fast-time rate that fills 85 % of the chirp interval with the ADC window."""
         return self.n_range_bins / (0.85 * self.chirp_interval_s)
+
+    def with_duration(self, scene_duration_s: float) -> SimProfile:
+        """This profile with scenes of ``scene_duration_s`` seconds, the change listed in ``reductions``.
+
+        Raises
+        ------
+        ZendarError
+            When ``scene_duration_s`` is not a finite number of at least ``MIN_SCENE_DURATION_S``.
+        """
+        if not (isinstance(scene_duration_s, (int, float)) and not isinstance(scene_duration_s, bool)
+                and math.isfinite(scene_duration_s) and scene_duration_s >= MIN_SCENE_DURATION_S):
+            raise ZendarError(
+                f"scene duration must be a number of seconds >= {MIN_SCENE_DURATION_S:g}, got {scene_duration_s!r}"
+            )
+        if scene_duration_s == self.scene_duration_s:
+            return self
+        note = f"{scene_duration_s:g} s scenes instead of the profile's {self.scene_duration_s:g} s"
+        return replace(self, scene_duration_s=scene_duration_s, reductions=(*self.reductions, note))
 
     def to_json(self) -> dict:
         """Plain-JSON description (recorded in dataset.json for resumable runs)."""

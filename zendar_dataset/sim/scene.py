@@ -192,8 +192,12 @@ def simulate_cube(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_
     return cube + range_doppler(noise, workers=1)
 
 
-def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s: float, rng: np.random.Generator, tracklog: PoseInterpolator):
-    """One SAR image and its ECEF image model: ``(image [H, W], grid_ecef, aperture (t0, t1) s)``."""
+def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s: float, rng: np.random.Generator,
+                 tracklog: PoseInterpolator, device: str | None = None):
+    """One SAR image and its ECEF image model: ``(image [H, W], grid_ecef, aperture (t0, t1) s)``.
+
+    ``device``: where the image is backprojected (see :func:`~zendar_dataset.sim.sar_formation.form_image`).
+    """
     front_end = RadarFrontEnd()
     mount = ego_model.EGO_T_SENSOR[sensor]
     geometry = sar_footprint(profile, sensor)
@@ -243,7 +247,7 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     yaw = np.arctan2(c_r[1, 0], c_r[0, 0])
     level = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
     grid = geometry.grid_enu(level, c_t)
-    image = form_image(params, profiles, phase_centers, grid)
+    image = form_image(params, profiles, phase_centers, grid, device)
     return image, grid.transformed(truth.enu.ecef_T_enu), (float(t[0]), float(t[-1]))
 
 
@@ -275,8 +279,12 @@ def free_running_times(duration_s: float, rate_hz: float, jitter_s: float, rng: 
     return times[(times >= 0.0) & (times < duration_s)]
 
 
-def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene_index: int, *, with_labels: bool = True) -> dict:
-    """Simulate every stream of a scene into an open ``SceneWriter``; returns its label rows."""
+def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene_index: int, *, with_labels: bool = True,
+                sar_device: str | None = None) -> dict:
+    """Simulate every stream of a scene into an open ``SceneWriter``; returns its label rows.
+
+    ``sar_device``: where SAR images are backprojected (``None``: the numba kernel on the CPU).
+    """
     duration = profile.scene_duration_s
 
     def ns(t: float) -> int:
@@ -301,7 +309,7 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
     for sensor in ego_model.RADARS:
         rng = stream_rng(seed, scene_index, f"sar_{sensor}")
         for t in sar_times:
-            image, grid, (t0, t1) = simulate_sar(truth, profile, sensor, t, rng, tracklog)
+            image, grid, (t0, t1) = simulate_sar(truth, profile, sensor, t, rng, tracklog, sar_device)
             writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64))
     rng = stream_rng(seed, scene_index, "lidar")
     returns_per_sweep = {}
