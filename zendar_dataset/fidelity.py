@@ -94,6 +94,12 @@ def _simulation_truth(root: str) -> Callable[[str], Any] | None:
         settings = json.load(handle)
     recorded = settings.get("profile", {})
     profile = PROFILES.get(recorded.get("name"))
+    # `synth --duration-s` records the named profile with another scene length.
+    if profile is not None and recorded.get("scene_duration_s") != profile.scene_duration_s:
+        try:
+            profile = profile.with_duration(recorded.get("scene_duration_s"))
+        except ZendarError:
+            return None
     # The truth is only the truth when this simulator would draw the same scenes.
     if profile is None or json.loads(json.dumps(profile.to_json())) != recorded:
         return None

@@ -117,3 +117,20 @@ def test_a_field_of_view_out_of_range_is_named_in_the_calibration_error(tiny_roo
         Calibration.from_json(document)
     del document["sensors"]["front_left"]["fov_azimuth_deg"]
     assert Calibration.from_json(document).radar("front_left").fov_azimuth_deg is None
+
+
+def test_a_shortened_scene_still_has_its_truth_rebuilt_but_an_edited_profile_does_not(tmp_path):
+    from zendar_dataset.sim.profiles import get_profile
+
+    root = tmp_path / "short"
+    synthesize_dataset(root, get_profile("tiny").with_duration(0.6), n_scenes=1, seed=11, split_ratios=(1, 0, 0),
+                       progress=False)
+    report = fidelity_report(root)
+    assert report["truth"] is True
+    assert report["visible_moving_cars_without_label"] == 0
+    assert report["visible_moving_cars"] == report["labels_in_radar_fov"]["labels"] > 0
+    # Any other change to the recorded profile: this simulator would not draw the same scenes.
+    settings = json.loads((root / "simulation.json").read_text())
+    settings["profile"]["sar_aperture_m"] = 0.2
+    (root / "simulation.json").write_text(json.dumps(settings))
+    assert fidelity_report(root)["truth"] is False
