@@ -72,6 +72,7 @@ def test_a_cpu_run_records_no_device(tmp_path):
     assert "sar_device" not in json.loads((out / "simulation.json").read_text())
 
 
+@pytest.mark.gpu
 @pytest.mark.skipif(not CUDA, reason="needs a CUDA GPU")
 def test_cuda_forms_the_same_image_and_is_recorded(tmp_path):
     reference, _, _ = _frame(None)
