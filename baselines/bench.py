@@ -20,7 +20,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 
 from zendar_dataset.errors import ZendarError
@@ -33,6 +33,9 @@ from zendar_baselines.configs import BenchConfig
 from zendar_baselines.fingerprints import dataset_fingerprint
 from zendar_baselines.results_table import METHOD_NAMES, Row, claims, csv_table, markdown_table
 from zendar_baselines.run_directory import RunDirectory, read_json, write_json
+
+if TYPE_CHECKING:
+    from zendar_baselines.pipeline import ScoringScenes
 
 #: Bootstrap resamples (over test scenes) for each row's 95 % interval.
 BOOTSTRAP_RESAMPLES = 200
@@ -137,21 +140,22 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: _score_into(d, pipeline.cfar_predictions(root), root))
     rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_json(cfar_dir / "metrics.json")]))
 
-    for model_name in config.models:
-        for pretrained in (False, True):
-            key = f"{model_name}-{'pretrained' if pretrained else 'supervised'}"
-            row = Row(key, METHOD_NAMES[model_name], pretrained, True)
-            for seed in range(options.seeds):
-                inputs = {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
-                          "model": model_name, "pretrained": pretrained, "seed": seed}
-                seed_dir, _, _ = run.step(
-                    f"rows/{key}/seed-{seed}", inputs,
-                    lambda d, s=seed, p=pretrained, m=model_name: _train_and_score(
-                        d, root, config, split, auto_dir, masks_dir, m, p, s, options.device, run.path),
-                )
-                row.seed_metrics.append(read_json(seed_dir / "metrics.json"))
-            _copy_first_seed(run.path / "rows" / key)
-            rows.append(row)
+    with pipeline.ScoringScenes(root) as test_scenes:
+        for model_name in config.models:
+            for pretrained in (False, True):
+                key = f"{model_name}-{'pretrained' if pretrained else 'supervised'}"
+                row = Row(key, METHOD_NAMES[model_name], pretrained, True)
+                for seed in range(options.seeds):
+                    inputs = {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
+                              "model": model_name, "pretrained": pretrained, "seed": seed}
+                    seed_dir, _, _ = run.step(
+                        f"rows/{key}/seed-{seed}", inputs,
+                        lambda d, s=seed, p=pretrained, m=model_name: _train_and_score(
+                            d, root, config, split, auto_dir, masks_dir, m, p, s, options.device, run.path, test_scenes),
+                    )
+                    row.seed_metrics.append(read_json(seed_dir / "metrics.json"))
+                _copy_first_seed(run.path / "rows" / key)
+                rows.append(row)
 
     results = _write_outputs(run.path, root, config, options, rows, quality, time.monotonic() - started)
     return results
@@ -164,12 +168,13 @@ def _score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
 
 
 def _train_and_score(out_dir: Path, root: Path, config: BenchConfig, split, auto_dir: Path, masks_dir: Path,
-                     model_name: str, pretrained: bool, seed: int, device: str, run_path: Path) -> None:
+                     model_name: str, pretrained: bool, seed: int, device: str, run_path: Path,
+                     test_scenes: ScoringScenes) -> None:
     from zendar_baselines import pipeline
 
     checkpoint = pipeline.train_row(out_dir, root, config, split, auto_dir, masks_dir, run_path / "inputs", model_name,
                                     pretrained, seed, device)
-    _score_into(out_dir, pipeline.cnn_predictions(root, config, checkpoint, device), root)
+    _score_into(out_dir, pipeline.cnn_predictions(root, config, checkpoint, device, scenes=test_scenes), root)
 
 
 def _copy_first_seed(row_dir: Path) -> None:

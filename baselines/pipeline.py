@@ -8,6 +8,7 @@ for the test scenes goes through the same chain as the CFAR baseline (DOA, SAR t
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 from pathlib import Path
@@ -223,18 +224,92 @@ def cfar_predictions(root: Path) -> dict[str, Any]:
     return cfar_baseline.cfar_predictions(str(root), "test")
 
 
+#: Budget for what :class:`ScoringScenes` keeps between scorings: the test split's SAR magnitudes and
+#: log-power maps (float32). The demo config's take ~280 MB; the paper config's would not fit, and
+#: every scoring then reads them again.
+TEST_SCENE_CACHE_BYTES = 1 << 30
+
+
+@dataclasses.dataclass
+class _ScoringScene:
+    """One open test scene with what every scoring of it needs."""
+
+    reader: SceneReader
+    poses: Any
+    sar: SarFrames
+    maps: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+
+
+class ScoringScenes:
+    """The test split's scenes, opened once for many scorings (a context manager; closes them on exit).
+
+    A default run scores 18 CNNs on the same scenes. With ``keep`` and within
+    :data:`TEST_SCENE_CACHE_BYTES`, the SAR magnitudes (with their medians) and the log-power maps
+    read by the first scoring are kept for the next; results equal reading the scenes afresh (the
+    same arrays, read once; the maps are read-only).
+    """
+
+    def __init__(self, root: Path, *, keep: bool = True) -> None:
+        self.index = open_dataset(str(root))
+        self.keep = keep
+        self._scenes: dict[str, _ScoringScene] = {}
+        self._stack = contextlib.ExitStack()
+
+    def __enter__(self) -> ScoringScenes:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._scenes.clear()
+        self._stack.close()
+
+    def scene_ids(self) -> list[str]:
+        return self.index.scene_ids("test")
+
+    def _fits(self) -> bool:
+        total = 0
+        for scene_id in self.scene_ids():
+            with self.index.open_scene(scene_id) as reader:
+                arrays = [f"sar/{s}/image" for s in reader.sensors("sar")]
+                arrays += [f"radar/{r}/cube" for r in reader.sensors("radar")]
+                total += sum(4 * int(np.prod(reader.array(a).shape)) for a in arrays)
+        return total <= TEST_SCENE_CACHE_BYTES
+
+    def scene(self, scene_id: str) -> _ScoringScene:
+        """The open scene (kept when ``keep`` and the split fits the budget, else fresh each call)."""
+        if scene_id in self._scenes:
+            return self._scenes[scene_id]
+        if self.keep and not self._scenes and not self._fits():
+            self.keep = False
+        reader = self._stack.enter_context(self.index.open_scene(scene_id))
+        scene = _ScoringScene(reader, reader.ego_poses(), SarFrames(reader, keep_frames=None) if self.keep else SarFrames(reader))
+        if self.keep:
+            self._scenes[scene_id] = scene
+        return scene
+
+    def maps(self, scene: _ScoringScene, radar: str) -> np.ndarray:
+        """Log-power maps ``[N, A, R, D]`` of one radar of ``scene`` (kept with the scene)."""
+        from zendar_baselines.inputs import log_power_maps
+
+        if radar not in scene.maps:
+            maps = log_power_maps(scene.reader.array(f"radar/{radar}/cube"))
+            maps.flags.writeable = False
+            if not self.keep:
+                return maps
+            scene.maps[radar] = maps
+        return scene.maps[radar]
+
+
 def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: str,
-                    params: ChainParams | None = None) -> dict[str, Any]:
+                    params: ChainParams | None = None, scenes: ScoringScenes | None = None) -> dict[str, Any]:
     """A trained model's detections on every test frame, through the CFAR baseline's chain.
 
     Per radar cube with a full window of K maps, the cells the model calls moving (probability ≥
     :data:`MASK_THRESHOLD`, score = probability) are placed by DOA, put to the SAR test and
-    clustered with the other radar's points of the frame.
+    clustered with the other radar's points of the frame. ``scenes``: the test scenes shared with
+    other scorings (:class:`ScoringScenes`); by default they are opened for this call only.
     """
     from zendar_baselines.checkpoints import load_checkpoint, load_model_state
-    from zendar_baselines.inputs import log_power_maps, stack_window
     from zendar_baselines.models import build_model
-    from zendar_baselines.training import predict_masks
 
     stored = load_checkpoint(checkpoint)  # SHA-256 against the manifest, once
     architecture = stored["architecture"]
@@ -243,29 +318,39 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
     model.to(device)
     params = ChainParams() if params is None else params
     window = config.window
-    index = open_dataset(str(root))
-    results: dict[str, list[dict[str, float]]] = {}
-    with tqdm(desc=f"{architecture['name']} test", unit="frame") as bar:
-        for scene_id in index.scene_ids("test"):
-            with index.open_scene(scene_id) as reader:
-                probability = {}
-                for radar in reader.sensors("radar"):
-                    maps = log_power_maps(reader.array(f"radar/{radar}/cube"))
-                    probability[radar] = predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
-
-                def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
-                    if k < window - 1:  # no full window yet: the model has no input for this cube
-                        return mask_cells(np.zeros(cube.shape[:2]))
-                    return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
-
-                poses = reader.ego_poses()
-                for frame_ns, found in frame_cube_points(reader, cells_of, params, poses=poses):
-                    points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
-                    results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
-                    bar.update(1)
+    with contextlib.ExitStack() as stack:
+        if scenes is None:
+            scenes = stack.enter_context(ScoringScenes(root, keep=False))
+        results = _predict_test_split(model, scenes, window, params, device, architecture["name"])
     meta = {"method": f"{architecture['name']} mask + SAR test + DBSCAN", "checkpoint": checkpoint.name,
             "architecture": architecture, "parameters": params.to_json()}
     return {"meta": meta, "results": results}
+
+
+def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
+                        name: str) -> dict[str, list[dict[str, float]]]:
+    from zendar_baselines.inputs import stack_window
+    from zendar_baselines.training import predict_masks
+
+    results: dict[str, list[dict[str, float]]] = {}
+    with tqdm(desc=f"{name} test", unit="frame") as bar:
+        for scene_id in scenes.scene_ids():
+            scene = scenes.scene(scene_id)
+            probability = {}
+            for radar in scene.reader.sensors("radar"):
+                maps = scenes.maps(scene, radar)
+                probability[radar] = predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
+
+            def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
+                if k < window - 1:  # no full window yet: the model has no input for this cube
+                    return mask_cells(np.zeros(cube.shape[:2]))
+                return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
+
+            for frame_ns, found in frame_cube_points(scene.reader, cells_of, params, poses=scene.poses, sar=scene.sar):
+                points = FramePoints.concatenate([to_frame(cube, scene.poses, frame_ns) for cube in found])
+                results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
+                bar.update(1)
+    return results
 
 
 # --- bird's-eye figure ---------------------------------------------------------------------------

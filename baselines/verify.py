@@ -12,12 +12,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
 
 from zendar_baselines.configs import BenchConfig, Schedule
 from zendar_baselines.run_directory import RUN_MARKER, read_json
+
+if TYPE_CHECKING:
+    from zendar_baselines.pipeline import ScoringScenes
 
 #: Largest |AP difference| per band (fraction) for a row to count as reproduced.
 AP_TOLERANCE = 0.01
@@ -61,27 +65,39 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
         raise ZendarError(f"{out / 'results.json'}: not a zendar-bench results file ({exc!r} missing)") from None
     lines = [f"re-scoring {out} (tolerance {AP_TOLERANCE:g} AP per band)"]
     all_reproduced = True
-    for row in rows:
-        key = row["key"]
-        seed_dirs = sorted((out / "rows" / key).glob("seed-*")) if key != "cfar" else [out / "rows" / key]
-        if not seed_dirs:
-            raise ZendarError(f"{out / 'rows' / key}: no seed directories to re-score")
-        for seed_dir in seed_dirs:
-            recorded = read_json(seed_dir / "metrics.json")["ap"]
-            if key == "cfar":
-                predictions = pipeline.cfar_predictions(root)
-            else:
-                predictions = pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), device)
-            again = evaluate(predictions, str(root), split="test")["ap"]
-            worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
-                        default=0.0)
-            same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
-            ok = same_bands and worst <= AP_TOLERANCE and not math.isnan(worst)
-            all_reproduced &= ok
-            shown = " ".join(f"{b} {_pct(recorded[b])}->{_pct(again[b])}" for b in BANDS)
-            lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")
+    with pipeline.ScoringScenes(root) as test_scenes:
+        for row in rows:
+            all_reproduced &= _verify_row(out, row, root, config, device, test_scenes, lines)
     lines.append("every row reproduces" if all_reproduced else "some rows do not reproduce within the tolerance")
     return VerifyReport(all_reproduced, "\n".join(lines))
+
+
+def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: str,
+                test_scenes: ScoringScenes, lines: list[str]) -> bool:
+    """Re-score every seed of one row, appending a line each; True when all reproduce."""
+    from zendar_baselines import pipeline
+
+    key = row["key"]
+    seed_dirs = sorted((out / "rows" / key).glob("seed-*")) if key != "cfar" else [out / "rows" / key]
+    if not seed_dirs:
+        raise ZendarError(f"{out / 'rows' / key}: no seed directories to re-score")
+    all_reproduced = True
+    for seed_dir in seed_dirs:
+        recorded = read_json(seed_dir / "metrics.json")["ap"]
+        if key == "cfar":
+            predictions = pipeline.cfar_predictions(root)
+        else:
+            predictions = pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), device,
+                                                   scenes=test_scenes)
+        again = evaluate(predictions, str(root), split="test")["ap"]
+        worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
+                    default=0.0)
+        same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
+        ok = same_bands and worst <= AP_TOLERANCE and not math.isnan(worst)
+        all_reproduced &= ok
+        shown = " ".join(f"{b} {_pct(recorded[b])}->{_pct(again[b])}" for b in BANDS)
+        lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")
+    return all_reproduced
 
 
 def _pct(value: float | None) -> str:

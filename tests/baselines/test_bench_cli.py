@@ -100,6 +100,35 @@ def test_verify_rescores_from_the_checkpoints(quick_run):
     assert "every row reproduces" in done.stdout
 
 
+def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(quick_run, monkeypatch):
+    """The run scores every CNN through one ScoringScenes (SAR magnitudes and maps read once): a model
+    scored on kept scenes, on fresh ones, and with the cache over its budget gives the same bytes."""
+    from zendar_baselines import pipeline
+    from zendar_baselines.configs import get_config
+
+    home, _ = quick_run
+    out = home / "out"
+    root = Path(json.loads((out / "results.json").read_text())["dataset"]["root"])
+    config = get_config("tiny")
+    seed_dirs = [out / "rows" / key / "seed-0" for key in ("densenet-37-pretrained", "fpn-resnet34-supervised")]
+    recorded = [json.loads((d / "predictions.json").read_text())["results"] for d in seed_dirs]
+
+    def score(seed_dir, scenes=None):
+        return pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), "cpu", scenes=scenes)["results"]
+
+    with pipeline.ScoringScenes(root) as scenes:
+        kept = [score(d, scenes) for d in seed_dirs] + [score(seed_dirs[0], scenes)]
+        scene = scenes.scene(scenes.scene_ids()[0])
+        assert scenes.scene(scenes.scene_ids()[0]) is scene and scene.maps
+        assert all(not maps.flags.writeable for maps in scene.maps.values())
+    assert kept == [*recorded, recorded[0]]
+    assert score(seed_dirs[1]) == recorded[1]
+    monkeypatch.setattr(pipeline, "TEST_SCENE_CACHE_BYTES", 0)
+    with pipeline.ScoringScenes(root) as scenes:
+        assert score(seed_dirs[0], scenes) == recorded[0]
+        assert not scenes.keep and scenes.scene(scenes.scene_ids()[0]) is not scenes.scene(scenes.scene_ids()[0])
+
+
 def test_verify_names_a_damaged_checkpoint(quick_run, tmp_path):
     home, _ = quick_run
     copy = tmp_path / "copy"

@@ -32,6 +32,9 @@ class SarFrames:
     ----------
     reader : SceneReader
         The scene; every sensor of kind ``sar`` is used (none is fine: ``sensors`` is then empty).
+    keep_frames : int or None
+        Magnitudes kept per sensor (default :data:`CACHED_FRAMES_PER_SENSOR`); ``None`` keeps every
+        frame read, for a caller that visits a scene many times and has the memory.
 
     Attributes
     ----------
@@ -46,7 +49,7 @@ class SarFrames:
         ``[N, H, W]`` stored images per sensor (read on access).
     """
 
-    def __init__(self, reader: SceneReader) -> None:
+    def __init__(self, reader: SceneReader, keep_frames: int | None = CACHED_FRAMES_PER_SENSOR) -> None:
         self.sensors = reader.sensors("sar")
         self.timestamps = {s: reader.timestamps(f"sar/{s}") for s in self.sensors}
         self.origin = {s: reader.array(f"sar/{s}/origin_ecef")[...] for s in self.sensors}
@@ -54,6 +57,7 @@ class SarFrames:
         self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
         self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
         self._cache: OrderedDict[tuple[str, int], tuple[np.ndarray, float]] = OrderedDict()
+        self._keep = None if keep_frames is None else int(keep_frames) * max(1, len(self.sensors))
 
     def magnitude(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
         """One image's magnitude and its median non-zero magnitude.
@@ -79,7 +83,7 @@ class SarFrames:
             magnitude = np.abs(self.images[sensor][frame])
             floor = float(np.median(magnitude[magnitude > 0])) if np.any(magnitude > 0) else 1.0
             self._cache[key] = (magnitude, floor)
-            if len(self._cache) > CACHED_FRAMES_PER_SENSOR * max(1, len(self.sensors)):
+            if self._keep is not None and len(self._cache) > self._keep:
                 self._cache.popitem(last=False)
         return self._cache[key]
 
