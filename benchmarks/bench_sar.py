@@ -3,6 +3,7 @@
     python benchmarks/bench_sar.py                 # CPU: numpy per pulse, torch, numba (two loop orders)
     python benchmarks/bench_sar.py --device cuda   # adds torch on the GPU (eager and torch_compile)
     python benchmarks/bench_sar.py --ffbp          # only: fast factorised backprojection vs the numba kernel
+    python benchmarks/bench_sar.py --paper-size    # only: the numba kernel at paper size, row tiles vs none
 
 All methods image the same scene (paper geometry: 4 cm pixels, 2 m aperture, 77 GHz)
 in the same run. The reference is plain float32 numpy per pulse (vectorised over pixels, one
@@ -241,6 +242,42 @@ def bench_ffbp(size: int, repeats: int) -> None:
                   f"{diff:8.3f} {peak_db:8.2f}")
 
 
+def bench_paper_size(rows: int, repeats: int) -> None:
+    """The numba kernel on a band of a paper SAR image: ``rows`` × 1890 pixels of 4 cm, 1753 pulses of
+    8,960 samples (1 cm, 4× upsampled 3.75 GHz profiles to 90 m: 126 MB, beyond every cache), with its
+    row tiles and with one row segment per task (the kernel's earlier loop order), in the same run."""
+    from zendar_dataset.sar import backprojection_numba
+
+    rng = np.random.default_rng(0)
+    pulses, samples, width, pixel_m = 1753, 8960, 1890, 0.04
+    profiles = (rng.normal(size=(pulses, samples)) + 1j * rng.normal(size=(pulses, samples))).astype(np.complex64)
+    positions = np.zeros((pulses, 3))
+    positions[:, 0] = np.linspace(-1.0, 1.0, pulses)
+    positions[:, 2] = 0.5
+    grid = ImageGrid.axis_aligned([2.0 + pixel_m * width / 2, 3.0 + pixel_m * rows / 2, 0.0], [0.6, 0.8, 0.0],
+                                  [-0.8, 0.6, 0.0], pixel_m, (rows, width))
+    print(f"\nnumba kernel at paper size: {rows}x{width} pixels of 4 cm, {pulses} pulses x {samples} samples "
+          f"({profiles.nbytes / 2**20:.0f} MiB of profiles), threads {numba.get_num_threads()}")
+    print(f"{'rows per task':>14s} {'seconds median (min-max)':>26s} {'G pix*pulse/s':>14s}")
+    default = backprojection_numba.ROWS_PER_TILE
+    images = {}
+    try:
+        for tile_rows in (1, default):
+            backprojection_numba.ROWS_PER_TILE = tile_rows
+
+            def run():
+                return backproject(profiles, positions, grid, range_bin_m=0.01, center_frequency_hz=CENTER_FREQUENCY_HZ)
+
+            images[tile_rows] = run()
+            seconds = time_calls(run, repeats)
+            label = f"{tile_rows}" + (" (default)" if tile_rows == default else " (earlier)")
+            print(f"{label:>14s} {seconds.text():>26s} {rows * width * pulses / seconds.median / 1e9:14.3f}")
+    finally:
+        backprojection_numba.ROWS_PER_TILE = default
+    same = np.array_equal(images[1].view(np.uint64), images[default].view(np.uint64))
+    print(f"images bit-identical: {same}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, default=512, help="image is size x size pixels")
@@ -249,7 +286,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per method (min / median / max)")
     parser.add_argument("--device", default="cpu", help="'cuda' adds torch on the GPU")
     parser.add_argument("--ffbp", action="store_true", help="only the fast factorised backprojection rows")
+    parser.add_argument("--paper-size", action="store_true", help="only the numba kernel at paper size, tiled vs not")
     args = parser.parse_args()
+    if args.paper_size:
+        print_environment(("numpy", "numba"))
+        bench_paper_size(256, args.repeats)
+        print_load_after()
+        return
     if args.ffbp:
         print_environment(("numpy", "numba"))
         bench_ffbp(args.size, args.repeats)
