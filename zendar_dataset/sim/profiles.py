@@ -11,6 +11,7 @@ docs/simulator.md and in each profile's ``reductions``.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field, replace
 
 from zendar_dataset.errors import ZendarError
@@ -131,11 +132,12 @@ class SimProfile:
         ZendarError
             When ``scene_duration_s`` is not a finite number of at least ``MIN_SCENE_DURATION_S``.
         """
-        if not (isinstance(scene_duration_s, (int, float)) and not isinstance(scene_duration_s, bool)
+        if not (isinstance(scene_duration_s, numbers.Real) and not isinstance(scene_duration_s, bool)
                 and math.isfinite(scene_duration_s) and scene_duration_s >= MIN_SCENE_DURATION_S):
             raise ZendarError(
                 f"scene duration must be a number of seconds >= {MIN_SCENE_DURATION_S:g}, got {scene_duration_s!r}"
             )
+        scene_duration_s = float(scene_duration_s)
         if scene_duration_s == self.scene_duration_s:
             return self
         note = f"{scene_duration_s:g} s scenes instead of the profile's {self.scene_duration_s:g} s"
