@@ -20,7 +20,7 @@ from tqdm import tqdm
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import SceneReader, open_dataset
-from zendar_dataset.geometry.frames import sar_pixel_to_ecef
+from zendar_dataset.geometry.frames import EgoPoses, sar_pixel_to_ecef
 from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
@@ -235,7 +235,7 @@ class _ScoringScene:
     """One open test scene with what every scoring of it needs."""
 
     reader: SceneReader
-    poses: Any
+    poses: EgoPoses
     sar: SarFrames
     maps: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
@@ -329,6 +329,7 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
 
 def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
                         name: str) -> dict[str, list[dict[str, float]]]:
+    """Per test frame id, the detections of ``model``'s masks through the chain (see :func:`cnn_predictions`)."""
     from zendar_baselines.inputs import stack_window
     from zendar_baselines.training import predict_masks
 
