@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -250,6 +251,7 @@ class ScoringScenes:
     """
 
     def __init__(self, root: Path, *, keep: bool = True) -> None:
+        self.root = Path(root)
         self.index = open_dataset(str(root))
         self.keep = keep
         self._scenes: dict[str, _ScoringScene] = {}
@@ -274,17 +276,22 @@ class ScoringScenes:
                 total += sum(4 * int(np.prod(reader.array(a).shape)) for a in arrays)
         return total <= TEST_SCENE_CACHE_BYTES
 
-    def scene(self, scene_id: str) -> _ScoringScene:
-        """The open scene (kept when ``keep`` and the split fits the budget, else fresh each call)."""
+    @contextlib.contextmanager
+    def opened(self, scene_id: str) -> Iterator[_ScoringScene]:
+        """The open scene: kept for later scorings when ``keep`` and the split fits the budget,
+        else opened for this ``with`` block only."""
         if scene_id in self._scenes:
-            return self._scenes[scene_id]
+            yield self._scenes[scene_id]
+            return
         if self.keep and not self._scenes and not self._fits():
             self.keep = False
-        reader = self._stack.enter_context(self.index.open_scene(scene_id))
-        scene = _ScoringScene(reader, reader.ego_poses(), SarFrames(reader, keep_frames=None) if self.keep else SarFrames(reader))
         if self.keep:
-            self._scenes[scene_id] = scene
-        return scene
+            reader = self._stack.enter_context(self.index.open_scene(scene_id))
+            self._scenes[scene_id] = _ScoringScene(reader, reader.ego_poses(), SarFrames(reader, keep_frames=None))
+            yield self._scenes[scene_id]
+            return
+        with self.index.open_scene(scene_id) as reader:
+            yield _ScoringScene(reader, reader.ego_poses(), SarFrames(reader))
 
     def maps(self, scene: _ScoringScene, radar: str) -> np.ndarray:
         """Log-power maps ``[N, A, R, D]`` of one radar of ``scene`` (kept with the scene)."""
@@ -318,6 +325,8 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
     model.to(device)
     params = ChainParams() if params is None else params
     window = config.window
+    if scenes is not None and scenes.root.resolve() != Path(root).resolve():
+        raise ValueError(f"cnn_predictions: scenes of {scenes.root} given to score {root}")
     with contextlib.ExitStack() as stack:
         if scenes is None:
             scenes = stack.enter_context(ScoringScenes(root, keep=False))
@@ -336,21 +345,22 @@ def _predict_test_split(model, scenes: ScoringScenes, window: int, params: Chain
     results: dict[str, list[dict[str, float]]] = {}
     with tqdm(desc=f"{name} test", unit="frame") as bar:
         for scene_id in scenes.scene_ids():
-            scene = scenes.scene(scene_id)
-            probability = {}
-            for radar in scene.reader.sensors("radar"):
-                maps = scenes.maps(scene, radar)
-                probability[radar] = predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
+            with scenes.opened(scene_id) as scene:
+                probability = {}
+                for radar in scene.reader.sensors("radar"):
+                    maps = scenes.maps(scene, radar)
+                    probability[radar] = predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
 
-            def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
-                if k < window - 1:  # no full window yet: the model has no input for this cube
-                    return mask_cells(np.zeros(cube.shape[:2]))
-                return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
+                def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
+                    if k < window - 1:  # no full window yet: the model has no input for this cube
+                        return mask_cells(np.zeros(cube.shape[:2]))
+                    return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
 
-            for frame_ns, found in frame_cube_points(scene.reader, cells_of, params, poses=scene.poses, sar=scene.sar):
-                points = FramePoints.concatenate([to_frame(cube, scene.poses, frame_ns) for cube in found])
-                results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
-                bar.update(1)
+                for frame_ns, found in frame_cube_points(scene.reader, cells_of, params, poses=scene.poses,
+                                                         sar=scene.sar):
+                    points = FramePoints.concatenate([to_frame(cube, scene.poses, frame_ns) for cube in found])
+                    results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
+                    bar.update(1)
     return results
 
 

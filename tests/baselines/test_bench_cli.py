@@ -118,15 +118,19 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
 
     with pipeline.ScoringScenes(root) as scenes:
         kept = [score(d, scenes) for d in seed_dirs] + [score(seed_dirs[0], scenes)]
-        scene = scenes.scene(scenes.scene_ids()[0])
-        assert scenes.scene(scenes.scene_ids()[0]) is scene and scene.maps
-        assert all(not maps.flags.writeable for maps in scene.maps.values())
+        first = scenes.scene_ids()[0]
+        with scenes.opened(first) as scene, scenes.opened(first) as again:
+            assert again is scene and scene.maps
+            assert all(not maps.flags.writeable for maps in scene.maps.values())
+        with pytest.raises(ValueError, match="scenes of"):
+            pipeline.cnn_predictions(home, config, pipeline.final_checkpoint(seed_dirs[0]), "cpu", scenes=scenes)
     assert kept == [*recorded, recorded[0]]
     assert score(seed_dirs[1]) == recorded[1]
     monkeypatch.setattr(pipeline, "TEST_SCENE_CACHE_BYTES", 0)
     with pipeline.ScoringScenes(root) as scenes:
         assert score(seed_dirs[0], scenes) == recorded[0]
-        assert not scenes.keep and scenes.scene(scenes.scene_ids()[0]) is not scenes.scene(scenes.scene_ids()[0])
+        with scenes.opened(first) as scene, scenes.opened(first) as again:
+            assert not scenes.keep and again is not scene
 
 
 def test_verify_names_a_damaged_checkpoint(quick_run, tmp_path):

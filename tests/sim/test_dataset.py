@@ -169,6 +169,8 @@ def test_duration_option_shortens_scenes_is_recorded_and_is_part_of_the_resume_k
     before = _files(out)
     assert main(["synth", str(out), "--profile", "tiny", "--scenes", "1", "--quiet"]) == 2
     assert "other settings" in capsys.readouterr().err and _files(out) == before
+    assert main(["synth", str(tmp_path / "partial"), "--profile", "tiny", "--duration-s", "0.75", "--quiet"]) == 2
+    assert "whole number of SAR frame periods" in capsys.readouterr().err and not (tmp_path / "partial").exists()
     for bad in ("0.2", "nan", "-1", "inf"):
         assert main(["synth", str(tmp_path / f"bad{bad}"), "--profile", "tiny", "--duration-s", bad, "--quiet"]) == 2
         assert "scene duration" in capsys.readouterr().err

@@ -48,8 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the profile's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--duration-s", type=float, default=None, metavar="SECONDS",
-                        help="length of each scene (default: the profile's; at least 0.5); recorded with the "
-                        "profile in OUT/simulation.json")
+                        help="length of each scene (default: the profile's; at least 0.5, a multiple of 0.1); recorded "
+                        "with the profile in OUT/simulation.json")
     parser.add_argument("--split-ratios", type=_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
     parser.add_argument("--withhold-test-labels", action="store_true",
@@ -60,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "they save; 1 = in this process); the output does not depend on it")
     parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
                         help="where SAR images are backprojected: cpu (numba kernel, default) or cuda (torch on the "
-                        "GPU: the same sum, equal to rounding; recorded in OUT/simulation.json)")
+                        "GPU: the same sum, equal to rounding; recorded in OUT/simulation.json). Each worker "
+                        "process holds its own GPU memory: lower --jobs if the GPU runs out")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 

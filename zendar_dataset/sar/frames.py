@@ -57,7 +57,9 @@ class SarFrames:
         self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
         self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
         self._cache: OrderedDict[tuple[str, int], tuple[np.ndarray, float]] = OrderedDict()
-        self._keep = None if keep_frames is None else int(keep_frames) * max(1, len(self.sensors))
+        if keep_frames is not None and not (isinstance(keep_frames, int) and keep_frames >= 1):
+            raise ValueError(f"SarFrames: keep_frames must be None or a positive integer, got {keep_frames!r}")
+        self._keep = None if keep_frames is None else keep_frames * max(1, len(self.sensors))
 
     def magnitude(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
         """One image's magnitude and its median non-zero magnitude.

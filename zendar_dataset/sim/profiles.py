@@ -130,7 +130,8 @@ class SimProfile:
         Raises
         ------
         ZendarError
-            When ``scene_duration_s`` is not a finite number of at least ``MIN_SCENE_DURATION_S``.
+            When ``scene_duration_s`` is not a finite number of at least ``MIN_SCENE_DURATION_S``, or
+            not a whole number of SAR frame periods.
         """
         if not (isinstance(scene_duration_s, numbers.Real) and not isinstance(scene_duration_s, bool)
                 and math.isfinite(scene_duration_s) and scene_duration_s >= MIN_SCENE_DURATION_S):
@@ -138,6 +139,14 @@ class SimProfile:
                 f"scene duration must be a number of seconds >= {MIN_SCENE_DURATION_S:g}, got {scene_duration_s!r}"
             )
         scene_duration_s = float(scene_duration_s)
+        # SAR (and label) frames sit half a period into each period: a partial last period would put
+        # one at the scene's very end, after every free-running stream has stopped.
+        periods = scene_duration_s * self.sar_rate_hz
+        if abs(periods - round(periods)) > 1e-6:
+            raise ZendarError(
+                f"scene duration must be a whole number of SAR frame periods ({1 / self.sar_rate_hz:g} s), "
+                f"got {scene_duration_s:g}"
+            )
         if scene_duration_s == self.scene_duration_s:
             return self
         note = f"{scene_duration_s:g} s scenes instead of the profile's {self.scene_duration_s:g} s"

@@ -202,13 +202,13 @@ def form_image(
 
     The profiles are normalised by the window sum, so a point scatterer of
     per-sample amplitude ``a`` seen by ``P`` pulses peaks near ``a * P``.
-    ``device`` ``None`` uses the numba kernel; a torch device (``"cuda"``) the torch
-    backend there, which computes the same float32 sum (equal to rounding).
+    ``device`` ``None`` or ``"cpu"`` uses the numba kernel; a CUDA device (``"cuda"``) the
+    torch backend there, which computes the same float32 sum (equal to rounding).
     Returns complex64 ``[H, W]`` (numpy).
     """
     prepared, bin_m, frequency = profiles_for_backprojection(params, profiles)
     scale = 1.0 / float(np.sum(window_values("hann", params.n_samples)))
     return backproject(
         prepared * np.float32(scale), phase_centers, grid, range_bin_m=bin_m, center_frequency_hz=frequency,
-        backend="numba" if device is None else "torch", device=device,
+        backend="numba" if device in (None, "cpu") else "torch", device=None if device == "cpu" else device,
     )
