@@ -65,3 +65,16 @@ def test_snr_at_points_combines_projection_and_window(scene):
     # An explicit noise power replaces the estimate: 10x the power is 10 dB less.
     explicit = snr_at_points_db(image, grid, points[:1], radius_px=1, noise=10 * NOISE_POWER)
     assert explicit[0] == pytest.approx(SPOT_SNR_DB - 10, abs=0.3)
+
+
+def test_sar_frames_refuse_a_cache_of_no_frames():
+    from zendar_dataset.sar.frames import SarFrames
+
+    class NoSar:
+        def sensors(self, kind):
+            return []
+
+    for bad in (0, -1, 1.5, "2"):
+        with pytest.raises(ValueError, match="keep_frames"):
+            SarFrames(NoSar(), keep_frames=bad)
+    assert SarFrames(NoSar(), keep_frames=None).sensors == []
