@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import write_metrics
@@ -32,7 +33,7 @@ from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import BenchConfig
 from zendar_baselines.fingerprints import dataset_fingerprint
 from zendar_baselines.results_table import METHOD_NAMES, Row, claims, csv_table, markdown_table
-from zendar_baselines.run_directory import RunDirectory, read_json, write_json
+from zendar_baselines.run_directory import RunDirectory, read_json
 
 if TYPE_CHECKING:
     from zendar_baselines.pipeline import ScoringScenes
@@ -162,7 +163,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
 
 def _score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
-    write_json(out_dir / "predictions.json", predictions)
+    write_json_atomic(out_dir / "predictions.json", predictions)
     metrics = evaluate(out_dir / "predictions.json", str(root), split="test", bootstrap=BOOTSTRAP_RESAMPLES)
     write_metrics(metrics, out_dir)
 
@@ -180,7 +181,7 @@ def _train_and_score(out_dir: Path, root: Path, config: BenchConfig, split, auto
 def _copy_first_seed(row_dir: Path) -> None:
     """``rows/<key>/{metrics,predictions}.json``: the first seed's, beside ``seed-<k>/``."""
     for name in ("metrics.json", "predictions.json"):
-        write_json(row_dir / name, read_json(row_dir / "seed-0" / name))
+        write_json_atomic(row_dir / name, read_json(row_dir / "seed-0" / name))
 
 
 def _write_outputs(out: Path, root: Path, config: BenchConfig, options: BenchOptions, rows: list[Row],
@@ -203,18 +204,18 @@ def _write_outputs(out: Path, root: Path, config: BenchConfig, options: BenchOpt
         "autolabel_quality": quality["quality"],
         "elapsed_s": round(elapsed_s, 1),
     }
-    write_json(out / "results.json", results)
+    write_json_atomic(out / "results.json", results)
     table = markdown_table(rows, title)
     table += "\n" + "\n".join(
         f"- {name.replace('_', ' ')}: {'holds' if v['holds'] else 'unknown' if v['holds'] is None else 'does not hold'}"
         + (f" ({'; '.join(v['failures'])})" if v["failures"] else "")
         for name, v in verdicts.items()
     ) + "\n"
-    from zendar_dataset.eval.report import write_atomically
+    from zendar_dataset.atomic_files import write_text_atomic
 
-    write_atomically(out / "table.md", table.encode("utf-8"))
-    write_atomically(out / "table.csv", csv_table(rows).encode("utf-8"))
-    write_json(out / "autolabel_quality.json", quality["quality"])
+    write_text_atomic(out / "table.md", table)
+    write_text_atomic(out / "table.csv", csv_table(rows))
+    write_json_atomic(out / "autolabel_quality.json", quality["quality"])
     curves = [(_label(row), row.seed_metrics[0]) for row in rows]
     write_pr_comparisons(curves, out)
     pipeline.write_bev_figure(out / "bev.png", root, {_label(row): out / "rows" / row.key / "predictions.json"

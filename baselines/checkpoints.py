@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.report import write_atomically
+from zendar_dataset.atomic_files import json_text, write_bytes_atomic, write_text_atomic
 
 from zendar_baselines.code_version import code_version
 
@@ -176,12 +176,12 @@ def save_checkpoint(
     torch.save(payload, buffer)
     data = buffer.getvalue()
     sha256 = hashlib.sha256(data).hexdigest()
-    write_atomically(path, data)
+    write_bytes_atomic(path, data)
     # The manifest follows the file: a run killed in between leaves a checkpoint the manifest does
     # not vouch for, which load_checkpoint refuses and training recomputes.
     manifest = read_manifest(path.parent)
     manifest[path.name] = sha256
-    write_atomically(path.parent / MANIFEST_NAME, (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+    write_text_atomic(path.parent / MANIFEST_NAME, json_text(manifest, indent=2, sort_keys=True))
     return sha256
 
 

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
 from zendar_dataset.eval.protocol import BANDS_M
-from zendar_dataset.eval.report import write_atomically
+from zendar_dataset.atomic_files import write_bytes_atomic
 
 _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 
@@ -24,7 +24,7 @@ _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 def _save_png(figure: Figure, path: Path) -> Path:
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png")
-    write_atomically(path, buffer.getvalue())
+    write_bytes_atomic(path, buffer.getvalue())
     return path
 
 

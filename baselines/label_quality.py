@@ -28,7 +28,7 @@ from scipy import ndimage
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BANDS_M
-from zendar_dataset.eval.report import _percent
+from zendar_dataset.eval.report import format_percent
 
 from zendar_baselines.mask_classes import BACKGROUND, MASK_CLASSES, MOVING, UNCERTAIN
 
@@ -212,7 +212,7 @@ def format_quality(quality: dict[str, Any]) -> str:
         counts = entry["counts"]
         lines.append(
             f"{band:<5} {f'[{low_m:g}, {high_m:g})':<10}"
-            + "".join(f" {_percent(entry[ratio]):>7}" for ratio in RATIOS)
+            + "".join(f" {format_percent(entry[ratio]):>7}" for ratio in RATIOS)
             + f" {counts['tp_cells']:>9} {counts['fp_cells']:>9} {counts['fn_cells']:>9}"
             + f" {counts['label_segments']:>9} {counts['auto_segments']:>9}"
         )

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import SceneReader, open_dataset
@@ -34,7 +35,7 @@ from zendar_baselines.detection_chain import (
 )
 from zendar_baselines.label_quality import combine_quality, format_quality, mask_quality
 from zendar_baselines.masks import MaskParams, scene_masks
-from zendar_baselines.run_directory import read_json, write_json
+from zendar_baselines.run_directory import read_json
 from zendar_baselines.side_store import AutoLabelStore
 from zendar_baselines.splits import SemiSupervisedSplit, make_split, read_split, write_split
 
@@ -107,7 +108,7 @@ def write_auto_labels(root: Path, scene_ids: list[str], out_dir: Path, *, qualit
         return None
     pooled = combine_quality(scores)
     document = {"quality": pooled, "table": format_quality(pooled)}
-    write_json(out_dir / "quality.json", document)
+    write_json_atomic(out_dir / "quality.json", document)
     return document
 
 
@@ -207,7 +208,7 @@ def train_row(out_dir: Path, root: Path, config: BenchConfig, split: SemiSupervi
     phase = "fine-tune" if pretrained else "supervised"
     result = train(model, labelled, schedule, seed=seed, out_dir=out_dir / phase, device=device, init_from=init_from,
                    description=f"{model_name} {phase} seed {seed} ({parameter_count(model):,} parameters)")
-    write_json(out_dir / CHECKPOINT_RECORD, {"checkpoint": str(result.checkpoint_path.relative_to(out_dir)),
+    write_json_atomic(out_dir / CHECKPOINT_RECORD, {"checkpoint": str(result.checkpoint_path.relative_to(out_dir)),
                                              "epoch_losses": list(result.epoch_losses)})
     return result.checkpoint_path
 

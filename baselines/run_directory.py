@@ -18,18 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
 
 from zendar_baselines.fingerprints import canonical_json_sha256
 
 RUN_MARKER = "zendar-bench.json"
 RUN_FORMAT = "zendar-bench-run"
 STEP_RECORD = "step.json"
-
-
-def write_json(path: Path, value: Any) -> None:
-    """Strict JSON, indented, written atomically."""
-    write_atomically(path, (json.dumps(value, indent=1, allow_nan=False) + "\n").encode("utf-8"))
 
 
 def read_json(path: Path) -> Any:
@@ -61,7 +56,7 @@ class RunDirectory:
         self.path = Path(path)
         if self.check_owner(self.path, identity) is None:
             prepare_out_dir(self.path)
-            write_json(self.path / RUN_MARKER, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
+            write_json_atomic(self.path / RUN_MARKER, {"format": RUN_FORMAT, "format_version": 1, "identity": identity})
         self.identity = identity
 
     @classmethod
@@ -132,5 +127,5 @@ class RunDirectory:
             shutil.rmtree(step_dir)
         prepare_out_dir(step_dir)
         compute(step_dir)
-        write_json(record, {"key": key, "inputs": inputs})
+        write_json_atomic(record, {"key": key, "inputs": inputs})
         return step_dir, key, False

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+from zendar_dataset.atomic_files import json_text, prepare_out_dir, write_bytes_atomic, write_text_atomic
 from zendar_dataset.format import stores
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.output_location import refuse_output_inside
@@ -59,10 +59,6 @@ RadarMasks = dict[str, tuple[np.ndarray, np.ndarray]]
 
 class AutoLabelStoreError(ZendarError):
     """An automatic-label store cannot be used; ``problems`` lists every problem found."""
-
-    def __init__(self, message: str, problems: list[str] | None = None) -> None:
-        super().__init__(message)
-        self.problems: list[str] = list(problems) if problems else [message]
 
 
 def _raise_problems(problems: list[str]) -> None:
@@ -524,7 +520,7 @@ class AutoLabelStore:
         np.savez_compressed(buffer, **arrays)
         data = buffer.getvalue()
         path = self.scene_path(scene_id)
-        write_atomically(path, data)
+        write_bytes_atomic(path, data)
         self.manifest["scenes"][scene_id] = {
             "file": path.name,
             "sha256": hashlib.sha256(data).hexdigest(),
@@ -560,8 +556,7 @@ class AutoLabelStore:
             }
 
     def _write_manifest(self) -> None:
-        text = json.dumps(self.manifest, indent=1, allow_nan=False) + "\n"
-        write_atomically(self.manifest_path, text.encode("utf-8"))
+        write_text_atomic(self.manifest_path, json_text(self.manifest))
 
 
 __all__ = [

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.output_location import refuse_output_inside
 
@@ -37,10 +37,6 @@ _OTHER_SPLITS = ("val", "test")
 
 class SplitError(ZendarError):
     """A split cannot be made or read; ``problems`` lists every problem found."""
-
-    def __init__(self, message: str, problems: list[str] | None = None) -> None:
-        super().__init__(message)
-        self.problems: list[str] = list(problems) if problems else [message]
 
 
 class ManualLabelLeakError(ZendarError):
@@ -179,7 +175,7 @@ def write_split(split: SemiSupervisedSplit, path: str | os.PathLike, *, dataset_
     content = split.to_json()
     document = {**content, "sha256": canonical_json_sha256(content)}
     prepare_out_dir(path.parent)
-    write_atomically(path, (json.dumps(document, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+    write_json_atomic(path, document)
     return path
 
 

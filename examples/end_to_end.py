@@ -22,7 +22,6 @@ Outputs in ``--out``: ``predictions.json`` (the evaluator's format) and
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -33,7 +32,8 @@ from zendar_dataset import ZendarDataset
 from zendar_dataset.classical_detector import cluster_cars, mount_velocity_ego, moving_points  # noqa: F401 (re-exported)
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.eval import evaluate
-from zendar_dataset.eval.report import format_table, prepare_out_dir, write_atomically, write_metrics
+from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
+from zendar_dataset.eval.report import format_table, write_metrics
 from zendar_dataset.format import frame_id
 from zendar_dataset.geometry.frames import EgoPoses
 
@@ -94,7 +94,7 @@ def run(root: str, split: str, out: Path) -> int:
     out = prepare_out_dir(out)
     predictions = {"meta": {"method": "cfar-doppler-dbscan (examples/end_to_end.py)"}, "results": results}
     path = out / "predictions.json"
-    write_atomically(path, (json.dumps(predictions, indent=1) + "\n").encode("utf-8"))
+    write_json_atomic(path, predictions)
     print(f"[3] wrote {path}")
     metrics = evaluate(path, root, split=split)
     print(format_table(metrics))

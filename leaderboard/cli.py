@@ -55,9 +55,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _problems(name: str, problems: list[str]) -> ZendarError:
-    error = ZendarError(f"{len(problems)} problems in {name!r}")
-    error.problems = problems
-    return error
+    return ZendarError(f"{len(problems)} problems in {name!r}", problems)
 
 
 def _serve(args: argparse.Namespace) -> int:

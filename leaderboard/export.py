@@ -8,30 +8,16 @@ name and renamed, and only these names are written inside OUT.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import orjson
 
+from zendar_dataset.atomic_files import write_bytes_atomic
 from zendar_dataset.errors import ZendarError
 from zendar_leaderboard import entries as entries_mod
 from zendar_leaderboard.pages import entry_page, ranking_page
 from zendar_leaderboard.server import entry_parts
 from zendar_leaderboard.store import Store
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(descriptor, "wb") as file:
-            file.write(data)
-            file.flush()
-            os.fsync(file.fileno())
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
@@ -54,7 +40,7 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
             continue
         page = entry_page(*found, static=True, root="../")
         path = out / "entry" / f"{entry['id']}.html"
-        _write_atomic(path, page.encode())
+        write_bytes_atomic(path, page.encode())
         written.append(path)
     files = {
         "leaderboard.json": orjson.dumps(board, option=orjson.OPT_INDENT_2),
@@ -62,6 +48,6 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
         "index.html": ranking_page(board, entry_href=lambda i: f"entry/{i}.html", static=True).encode(),
     }
     for name, data in files.items():
-        _write_atomic(out / name, data)
+        write_bytes_atomic(out / name, data)
         written.append(out / name)
     return written

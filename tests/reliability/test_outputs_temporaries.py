@@ -84,7 +84,7 @@ def test_convert_killed_with_sigkill_leaves_a_temporary_that_the_rerun_removes_a
 
 
 def test_stale_temporaries_of_scenes_and_json_are_removed_by_the_next_write(tmp_path):
-    from zendar_dataset.format.writer import write_json_atomic
+    from zendar_dataset.atomic_files import write_json_atomic
 
     pid = _dead_pid()
     stale = _stale_temporary(tmp_path / "gt.json", pid, directory=False)

@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     import pathlib
 
     from zendar_dataset.fidelity import fidelity_report, format_report
-    from zendar_dataset.format.writer import write_json_atomic
+    from zendar_dataset.atomic_files import write_json_atomic
 
     report = fidelity_report(args.root, args.split, progress=lambda scene: print(f"measuring {scene}", file=sys.stderr))
     print(format_report(report))

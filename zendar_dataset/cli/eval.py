@@ -77,7 +77,8 @@ def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help stays fast (numba, matplotlib).
     from zendar_dataset.errors import PredictionsError
     from zendar_dataset.eval.evaluate import evaluate
-    from zendar_dataset.eval.report import format_table, prepare_out_dir, write_metrics, write_problems
+    from zendar_dataset.atomic_files import prepare_out_dir
+    from zendar_dataset.eval.report import format_table, write_metrics, write_problems
 
     if args.out is not None:
         _refuse_output_into_inputs(args)

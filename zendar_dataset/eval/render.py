@@ -11,7 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from zendar_dataset.eval.protocol import BANDS_M
-from zendar_dataset.eval.report import prepare_out_dir, write_atomically
+from zendar_dataset.atomic_files import prepare_out_dir, write_bytes_atomic
 
 
 def pr_figure(metrics: dict[str, Any], band: str) -> Figure:
@@ -80,6 +80,6 @@ def plot_pr_curves(metrics: dict[str, Any], out_dir: str | os.PathLike) -> list[
         buffer = io.BytesIO()
         pr_figure(metrics, band).savefig(buffer, format="png")
         path = out / f"pr_{band}.png"
-        write_atomically(path, buffer.getvalue())
+        write_bytes_atomic(path, buffer.getvalue())
         written.append(path)
     return written

@@ -1,15 +1,13 @@
-"""The printed table (AP in percent, like the paper's Table 1) and the atomic metrics.json write."""
+"""The printed table (AP in percent, like the paper's Table 1) and the metrics.json / problems.txt writes."""
 
 from __future__ import annotations
 
-import errno
-import json
 import os
 from pathlib import Path
 from typing import Any
 
+from zendar_dataset.atomic_files import json_text, prepare_out_dir, write_text_atomic
 from zendar_dataset.eval.protocol import BANDS_M
-from zendar_dataset.temporary_files import remove_stale_temporaries, remove_temporary, temporary_sibling
 
 METRICS_FILENAME = "metrics.json"
 PROBLEMS_FILENAME = "problems.txt"
@@ -17,7 +15,8 @@ PROBLEMS_FILENAME = "problems.txt"
 OUTPUT_NAMES = (METRICS_FILENAME, PROBLEMS_FILENAME, *(f"pr_{band}.png" for band in BANDS_M))
 
 
-def _percent(value: float | None) -> str:
+def format_percent(value: float | None) -> str:
+    """A fraction in [0, 1] as a percentage with one decimal, ``n/a`` for None."""
     return "n/a" if value is None else f"{100.0 * value:.1f}"
 
 
@@ -52,13 +51,13 @@ def format_table(metrics: dict[str, Any]) -> str:
     columns += f" {'GT':>8} {'TP':>8} {'FP':>8}"
     lines += [columns, "-" * len(columns)]
     for band, (low_m, high_m) in BANDS_M.items():
-        row = f"{band:<5} {f'[{low_m:g}, {high_m:g})':<10} {_percent(metrics['ap'][band]):>7}"
+        row = f"{band:<5} {f'[{low_m:g}, {high_m:g})':<10} {format_percent(metrics['ap'][band]):>7}"
         if bootstrap:
             interval = bootstrap[band]
             text = (
                 "n/a"
                 if interval["low"] is None
-                else f"[{_percent(interval['low'])}, {_percent(interval['high'])}]"
+                else f"[{format_percent(interval['low'])}, {format_percent(interval['high'])}]"
             )
             row += f"  {text:<14}"
         counts = metrics["counts"][band]
@@ -74,47 +73,15 @@ def format_table(metrics: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write_atomically(path: Path, data: bytes) -> None:
-    """Write ``data`` to a temporary name beside ``path``, then rename it into place.
-
-    The file is created with mode 0o666 minus the umask, like any file the user creates; stale
-    temporaries of ``path`` left by a killed run are removed first (temporary_files.py).
-    """
-    remove_stale_temporaries(path.parent, path.name)
-    temp = temporary_sibling(path)
-    try:
-        with open(temp, "xb") as handle:
-            handle.write(data)
-        os.replace(temp, path)
-    finally:
-        remove_temporary(temp)
-
-
-def prepare_out_dir(out_dir: str | os.PathLike) -> Path:
-    """Create ``out_dir`` (and parents) unless it exists.
-
-    Raises
-    ------
-    NotADirectoryError
-        When ``out_dir`` (or a parent) exists and is not a directory; nothing is touched.
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a directory", str(out))
-    out.mkdir(parents=True, exist_ok=True)
-    return out
-
-
 def write_problems(problems: list[str], out_dir: str | os.PathLike) -> Path:
     """Write every problem, one per line, to ``out_dir/problems.txt`` (atomic); returns the path."""
     path = prepare_out_dir(out_dir) / PROBLEMS_FILENAME
-    write_atomically(path, "".join(f"{problem}\n" for problem in problems).encode("utf-8"))
+    write_text_atomic(path, "".join(f"{problem}\n" for problem in problems))
     return path
 
 
 def write_metrics(metrics: dict[str, Any], out_dir: str | os.PathLike) -> Path:
     """Write ``metrics`` as ``out_dir/metrics.json`` (strict JSON, atomic); returns the path."""
     path = prepare_out_dir(out_dir) / METRICS_FILENAME
-    text = json.dumps(metrics, indent=1, allow_nan=False) + "\n"
-    write_atomically(path, text.encode("utf-8"))
+    write_text_atomic(path, json_text(metrics))
     return path

@@ -22,7 +22,7 @@ from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON
-from zendar_dataset.format.writer import write_json_atomic
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.output_location import refuse_output_inside
 
 _TO = {"zarr": "zarr", "hdf5": "hdf5", "h5": "hdf5"}

@@ -18,7 +18,7 @@ import numpy as np
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.reader import SceneReader, open_dataset
 from zendar_dataset.format.schema import CAR_FIELDS, LABEL_OPTIONAL_FIELD_NAMES, LABELS, frame_id
-from zendar_dataset.format.writer import write_json_atomic
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.output_location import refuse_output_inside
 
 

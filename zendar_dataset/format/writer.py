@@ -13,7 +13,6 @@ Example
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 from dataclasses import dataclass, field
@@ -22,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset import temporary_files as temporary
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.calibration import CameraCalibration, Calibration, RadarCalibration
@@ -554,21 +554,6 @@ class SceneWriter:
             self._store.close()
         finally:
             temporary.remove_temporary(self._temp_path)
-
-
-def write_json_atomic(path: pathlib.Path, value: Any) -> None:
-    """Write JSON to ``path`` through a temporary sibling and an atomic rename."""
-    path = pathlib.Path(path)
-    temporary.remove_stale_temporaries(path.parent, path.name)
-    temp = temporary.temporary_sibling(path)
-    try:
-        # "x": never through a file that appeared under the temporary name; created 0o666 & ~umask.
-        with open(temp, "x", encoding="utf-8") as handle:
-            json.dump(value, handle, indent=1)
-            handle.write("\n")
-        os.replace(temp, path)
-    finally:
-        temporary.remove_temporary(temp)
 
 
 class DatasetWriter:

@@ -21,7 +21,8 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format.schema import DATASET_JSON, SPLITS
-from zendar_dataset.format.writer import DatasetWriter, write_json_atomic
+from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import records as rec

@@ -35,7 +35,8 @@ from tqdm import tqdm
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, frame_id
-from zendar_dataset.format.writer import DatasetWriter, write_json_atomic
+from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.sim import ego as ego_model
 from zendar_dataset.sim.profiles import SimProfile, get_profile
 from zendar_dataset.sim.scene import build_scene, write_scene
