@@ -1,7 +1,7 @@
 """Table 1, row 1: the CFAR baseline (paper §4.3).
 
 CA-CFAR peaks of each radar's latest cube at or before a SAR frame (the loader's rule, as in
-``examples/end_to_end.py``), then the shared chain (:mod:`zendar_baselines.detection_chain`):
+``examples/end_to_end.py``), then the shared chain (:mod:`zendar_dataset.detection`):
 DOA, the SAR static-scene test, DBSCAN clusters, one scored detection per cluster of dynamic points.
 """
 
@@ -12,7 +12,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from zendar_baselines.detection_chain import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
+from zendar_dataset.detection import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import open_dataset
 

@@ -2,13 +2,13 @@
 
     python -m zendar_baselines.chain_fit ROOT [--split train] [--sweep]
 
-1. The SAR test's threshold (:attr:`zendar_baselines.sar_test.SarTestParams.threshold_db`): the
+1. The SAR test's threshold (:attr:`zendar_dataset.detection.SarTestParams.threshold_db`): the
    test classifies points, so its threshold is the one that best separates the CFAR points inside
    labelled boxes from the others by the SAR value (Youden's J, the largest true-positive minus
    false-positive rate), rounded to 0.5 dB. The automatic labels need exactly that separation; a
    threshold tuned for the detector's AP instead would be a different method (``--sweep`` reports
    the chain's AP over a grid of thresholds, for reference).
-2. The centre offset (:attr:`zendar_baselines.detection_chain.ChainParams.centre_offset_m`): the
+2. The centre offset (:attr:`zendar_dataset.detection.ChainParams.centre_offset_m`): the
    radar sees a car's near face, so a cluster's centre falls short of the labelled centre along the
    line of sight. The offset is the median, over clusters whose uncorrected centre lies within
    :data:`OFFSET_MATCH_RADIUS_M` of a label, of the label centre's distance beyond the cluster
@@ -28,19 +28,19 @@ import numpy as np
 from sklearn.metrics import roc_auc_score, roc_curve
 from tqdm import tqdm
 
-from zendar_baselines.detection_chain import (
+from zendar_dataset.detection import (
+    ON_CAR_MARGIN_M,
     ChainParams,
     FramePoints,
+    LabelBoxes,
     cfar_cells,
     frame_clusters,
     frame_cube_points,
     frame_detections,
     to_frame,
 )
-from zendar_baselines.label_boxes import LabelBoxes
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
-from zendar_dataset.fidelity import ON_CAR_MARGIN_M
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import open_dataset
 

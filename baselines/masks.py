@@ -27,18 +27,20 @@ import numpy as np
 import scipy.ndimage
 from tqdm import tqdm
 
-from zendar_baselines.detection_chain import (
+from zendar_baselines.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
+from zendar_dataset.detection import (
+    ON_CAR_MARGIN_M,
     ChainParams,
+    LabelBoxes,
     cfar_map,
+    cluster_labels,
     cube_points,
     cube_power,
     frame_timestamps,
+    locate_cells,
+    nearest_label_frame,
 )
-from zendar_baselines.label_boxes import LabelBoxes, nearest_label_frame
-from zendar_baselines.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
-from zendar_dataset.classical_detector import cluster_labels, locate_cells
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.fidelity import ON_CAR_MARGIN_M
 from zendar_dataset.format.reader import SceneReader
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
 from zendar_dataset.radar import FmcwParams

@@ -19,6 +19,9 @@ import numpy as np
 from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.detection import (
+    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, mask_cells, to_frame,
+)
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import SceneReader, open_dataset
@@ -30,9 +33,6 @@ from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
 from zendar_baselines import cfar_baseline
 from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import BenchConfig
-from zendar_baselines.detection_chain import (
-    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, mask_cells, to_frame,
-)
 from zendar_baselines.label_quality import combine_quality, format_quality, mask_quality
 from zendar_baselines.masks import MaskParams, scene_masks
 from zendar_baselines.run_directory import read_json

@@ -303,7 +303,7 @@ def doa_rows(rng: np.random.Generator, repeat: int) -> list[Row]:
 def cuda_rows(batch: int, repeat: int) -> list[Row]:
     import torch
 
-    from zendar_dataset.radar.pipeline import RadarChain
+    from zendar_dataset.radar.batched_chain import RadarChain
 
     if not torch.cuda.is_available():
         print("--device cuda: no CUDA device here; the batched chain was not measured.")

@@ -7,7 +7,7 @@ A dataset to try it on: ``zendar-data synth /tmp/demo --profile demo --scenes 2`
 The detector here is a deliberately simple classical one, written to show the
 package's pieces working together; it is *not* the paper's baseline (CFAR +
 SAR-mask auto-labels + CNN, see ``baselines/``); its functions live in
-``zendar_dataset.classical_detector``. Per SAR frame it:
+``zendar_dataset.detection.classical``. Per SAR frame it:
 
 1. takes each radar's latest range-Doppler cube (the loader synchronises them);
 2. finds peaks with CA-CFAR and their azimuth with Bartlett beamforming;
@@ -29,7 +29,8 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from zendar_dataset import ZendarDataset
-from zendar_dataset.classical_detector import cluster_cars, mount_velocity_ego, moving_points  # noqa: F401 (re-exported)
+from zendar_dataset.detection.classical import cluster_cars, moving_points
+from zendar_dataset.detection.locate import mount_velocity_ego  # noqa: F401 (re-exported)
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.eval import evaluate
 from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic

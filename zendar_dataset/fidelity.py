@@ -12,10 +12,12 @@ evaluator (near [0, 15), mid [15, 30), far [30, 60) m of r = sqrt(x² + y²) in 
 - the CFAR detections of each radar's latest cube at or before the frame, split into detections on moving cars (inside a
   car's box grown by :data:`ON_CAR_MARGIN_M`; truth boxes where the truth is known, else labels)
   and static ones, and how well two tests separate them (ROC AUC, ``sklearn.metrics.roc_auc_score``):
-  the paper's SAR mask (a detection projecting onto a dark SAR pixel is moving, §2.3) and the plain
+  the paper's SAR mask (a detection projecting onto a dark SAR pixel is moving, §2.3), read exactly as
+  the baselines read it (:func:`zendar_dataset.detection.static_scene.sar_db_at`: the SAR frame
+  nearest the cube's time within 150 ms, brightest pixel near the point), and the plain
   Doppler test (measured radial velocity against a static point's at that azimuth);
 - the CFAR detection rate (labelled cars with at least one CFAR detection on them) and the AP of
-  :mod:`zendar_dataset.classical_detector` under the official evaluator.
+  :mod:`zendar_dataset.detection.classical` under the official evaluator.
 """
 
 from __future__ import annotations
@@ -31,7 +33,10 @@ from typing import Any
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from zendar_dataset.classical_detector import cluster_cars, radar_points
+from zendar_dataset.detection.boxes import ON_CAR_MARGIN_M, LabelBoxes
+from zendar_dataset.detection.classical import cluster_cars, radar_points
+from zendar_dataset.detection.scene import latest_cube
+from zendar_dataset.detection.static_scene import SarTestParams, sar_db_at
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.protocol import BANDS_M
@@ -47,9 +52,6 @@ from zendar_dataset.sim.scene import build_scene
 from zendar_dataset.sim.rotate import unrotate
 
 BANDS = ("near", "mid", "far")
-# A CFAR point counts as on a car when it falls inside the car's box grown by this much: the
-# range bin (0.18-0.6 m) plus the DOA error of a 4-antenna array at mid range (~1 deg -> 0.5 m at 30 m).
-ON_CAR_MARGIN_M = 1.0
 SIMULATION_JSON = "simulation.json"
 _SCENE_INDEX = re.compile(r"^scene-(\d+)$")
 
@@ -114,11 +116,9 @@ def _simulation_truth(root: str) -> Callable[[str], Any] | None:
 
 def _in_boxes(points_xy: np.ndarray, center: np.ndarray, length: np.ndarray, width: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """``[P, B]`` bool: points inside boxes grown by :data:`ON_CAR_MARGIN_M` (ego frame)."""
-    delta = points_xy[:, None, :] - center[None, :, :]
-    c, s = np.cos(yaw)[None], np.sin(yaw)[None]
-    along = c * delta[..., 0] + s * delta[..., 1]
-    across = -s * delta[..., 0] + c * delta[..., 1]
-    return (np.abs(along) <= length[None] / 2 + ON_CAR_MARGIN_M) & (np.abs(across) <= width[None] / 2 + ON_CAR_MARGIN_M)
+    n = len(length)
+    boxes = LabelBoxes(0, center[:, 0], center[:, 1], length, width, yaw, np.zeros(n), np.zeros(n))
+    return boxes.contains(points_xy, ON_CAR_MARGIN_M)
 
 
 def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) -> None:
@@ -198,8 +198,8 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
         # example's); points moved into this frame's ego frame.
         frame_points, frame_snr, label_hit = [], [], np.zeros(rows.size, bool)
         for radar in radars:
-            k = int(np.searchsorted(radar_times[radar], stamp, side="right")) - 1
-            if k < 0:
+            k = latest_cube(radar_times[radar], stamp)
+            if k is None:
                 continue
             cube_ns = int(radar_times[radar][k])
             found = radar_points(np.asarray(cubes[radar][k]), cube_ns, calibration.sensors[radar], poses)
@@ -210,12 +210,9 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
             if rows.size:
                 label_hit |= _in_boxes(points[:, :2], np.stack([x, y], 1) + np.stack([labels["vx"][rows], labels["vy"][rows]], 1) * dt,
                                        labels["length"][rows], labels["width"][rows], labels["yaw"][rows]).any(axis=0)
-            sar_db = np.full(points.shape[0], np.nan)
-            points_ecef = poses.ego_to_ecef(points, stamp)
-            for sensor in sar.sensors:
-                frame = sar.frame_index(sensor, stamp)
-                if frame is not None and points.shape[0]:
-                    sar_db = np.fmax(sar_db, sar.brightest_db(sensor, frame, points_ecef))
+            # The baselines' own static-scene reading of each point (the SAR frame nearest the cube).
+            sar_db = sar_db_at(sar, poses.ecef_T_ego(cube_ns).transform_points(found.points_ego), cube_ns,
+                               max_frame_gap_ns=SarTestParams().max_frame_gap_ns)
             tally.band.extend(_band(np.hypot(points[:, 0], points[:, 1])).tolist())
             tally.on_car.extend(on_car.tolist())
             tally.sar_db.extend(sar_db.tolist())

@@ -160,9 +160,28 @@ def _inside_span(reference_ns: np.ndarray, stream_ns: np.ndarray) -> np.ndarray:
     return np.where(inside, idx, MISSING).astype(np.int64)
 
 
+def latest_at_or_before(stream_ns: np.ndarray, reference_ns: np.ndarray | int) -> np.ndarray:
+    """The loader's rule for windowed streams: the latest element at or before each reference time.
+
+    Parameters
+    ----------
+    stream_ns : numpy.ndarray
+        ``[N]`` int64 sorted stream timestamps.
+    reference_ns : numpy.ndarray or int
+        Reference timestamps (any shape) or one timestamp.
+
+    Returns
+    -------
+    numpy.ndarray
+        int64 indices into ``stream_ns``, shaped like ``reference_ns``; -1 where no element is at or
+        before the reference.
+    """
+    return (np.searchsorted(stream_ns, reference_ns, side="right") - 1).astype(np.int64)
+
+
 def _latest(reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolerance_ns: int) -> np.ndarray:
     """Index of the latest element of a filled window per reference time, or MISSING."""
-    last = np.searchsorted(stream_ns, reference_ns, side="right") - 1
+    last = latest_at_or_before(stream_ns, reference_ns)
     filled = last >= window - 1
     safe = np.clip(last, 0, None)
     if stream_ns.size:

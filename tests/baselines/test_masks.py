@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from tests.baselines.chain_helpers import T0_NS, parked_poses, radar_calibration, radar_params, sar_frame, sar_frames, simulate_cube
-from zendar_baselines.detection_chain import ChainParams
-from zendar_baselines.label_boxes import LabelBoxes
+from tests.detection.chain_helpers import T0_NS, parked_poses, radar_calibration, radar_params, sar_frame, sar_frames, simulate_cube
+from zendar_dataset.detection import ChainParams
+from zendar_dataset.detection.boxes import LabelBoxes
 from zendar_baselines.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 from zendar_baselines.masks import MaskParams, auto_label_mask, grow_segments, scene_masks
-from zendar_baselines.sar_test import SarTestParams
-from zendar_dataset.classical_detector import locate_cells
+from zendar_dataset.detection.static_scene import SarTestParams
+from zendar_dataset.detection.locate import locate_cells
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim import ego as ego_model

@@ -15,7 +15,7 @@ import torch
 from tests.radar.radar_helpers import ula_params
 
 from zendar_dataset.radar.doa import estimate_azimuth
-from zendar_dataset.radar.pipeline import RadarChain
+from zendar_dataset.radar.batched_chain import RadarChain
 
 RANGE_M = 40.0
 AZIMUTHS_DEG = (23.0, -31.0, 7.5, -4.0)  # left, right, near boresight on both sides

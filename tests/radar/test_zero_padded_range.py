@@ -15,7 +15,7 @@ from tests.radar.radar_helpers import ula_params
 
 from zendar_dataset.radar.cfar import detect
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
-from zendar_dataset.radar.pipeline import RadarChain
+from zendar_dataset.radar.batched_chain import RadarChain
 from zendar_dataset.radar.range_doppler import range_doppler
 
 PAD = 4

@@ -1,7 +1,7 @@
 """Radar signal processing: FMCW model, range-Doppler compression, CFAR, direction of arrival.
 
 Pure array math on numpy, with torch paths (CPU and CUDA) where a batched GPU
-chain pays (:mod:`zendar_dataset.radar.pipeline`, imported on its own so that
+chain pays (:mod:`zendar_dataset.radar.batched_chain`, imported on its own so that
 importing this package does not import torch).
 """
 

@@ -1,5 +1,8 @@
 """The paper's static-scene test (§2.3): a radar point that lands on a dark SAR pixel is dynamic.
 
+This module holds the one definition of "the SAR value of a point" (:func:`sar_db_at`), read by the
+detection chain, the automatic labels, every Table 1 row and the fidelity report alike.
+
 A SAR image is formed without compensating moving objects, so it images the static scene cleanly
 and smears movers into the background (paper §1.1.2). A point on a static scatterer therefore
 projects onto a bright pixel; a point on a moving car onto the noise and clutter floor.
@@ -14,7 +17,7 @@ about 6 dB (3 x 3 pixels, tiny profile) to 8 dB (7 x 7, demo profile) over the m
 of the largest of ``n`` exponential powers is ``ln(n / ln 2)`` times the mean power, against
 ``ln 2`` times the mean for the median pixel. The threshold sits above that noise reading and below
 the static scatterers; its number is measured on the training split with
-``python -m zendar_baselines.chain_fit ROOT --split train`` (:mod:`zendar_baselines.chain_fit`).
+``python -m zendar_baselines.chain_fit ROOT --split train`` (``zendar_baselines.chain_fit``).
 
 Points that no SAR image covers (beyond the images' 60 m, outside the radars' field of view, or with
 no SAR frame near their time) read NaN: the test cannot confirm them static, nor call them dynamic.

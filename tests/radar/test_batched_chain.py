@@ -6,7 +6,7 @@ from tests.radar.radar_helpers import ula_params
 from zendar_dataset.radar.cfar import METHODS, cfar_2d, detect
 from zendar_dataset.radar.doa import estimate_azimuth
 from zendar_dataset.radar.fmcw import beat_signal_exact
-from zendar_dataset.radar.pipeline import RadarChain, cfar_torch
+from zendar_dataset.radar.batched_chain import RadarChain, cfar_torch
 from zendar_dataset.radar.range_doppler import range_doppler
 
 CFAR = dict(guard=(2, 2), train=(6, 4), pfa=1e-5)

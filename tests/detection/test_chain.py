@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from tests.baselines.chain_helpers import T0_NS, driving_poses, parked_poses, radar_calibration, radar_params, sar_frames, simulate_cube
+from tests.detection.chain_helpers import T0_NS, driving_poses, parked_poses, radar_calibration, radar_params, sar_frames, simulate_cube
 from zendar_baselines.cfar_baseline import cfar_predictions
-from zendar_baselines.detection_chain import (
+from zendar_dataset.detection import (
     ChainParams,
     CubePoints,
     FramePoints,

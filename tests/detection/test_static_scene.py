@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from tests.baselines.chain_helpers import T0_NS, parked_poses, sar_frame, sar_frames
-from zendar_baselines.sar_test import SarTestParams, is_dynamic, nearest_frames, sar_db_at
+from tests.detection.chain_helpers import T0_NS, parked_poses, sar_frame, sar_frames
+from zendar_dataset.detection.static_scene import SarTestParams, is_dynamic, nearest_frames, sar_db_at
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M
 
