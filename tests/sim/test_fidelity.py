@@ -134,3 +134,32 @@ def test_a_shortened_scene_still_has_its_truth_rebuilt_but_an_edited_profile_doe
     settings["profile"]["sar_aperture_m"] = 0.2
     (root / "simulation.json").write_text(json.dumps(settings))
     assert fidelity_report(root)["truth"] is False
+
+
+def test_the_sar_mask_auc_reads_the_baselines_static_scene_test(tiny_root, monkeypatch):
+    """Every SAR value behind the report's SAR-mask AUC is the detection chain's own reading of a CFAR
+    point (the SAR frame nearest the cube's time, not the frame's own image)."""
+    from zendar_dataset import fidelity
+    from zendar_dataset.detection import cfar_cells, frame_cube_points
+
+    read = []
+
+    def recording(*args, **kwargs):
+        values = fidelity_sar_db_at(*args, **kwargs)
+        read.append(values)
+        return values
+
+    fidelity_sar_db_at = fidelity.sar_db_at
+    monkeypatch.setattr(fidelity, "sar_db_at", recording)
+    fidelity.fidelity_report(tiny_root)
+    by_report = np.concatenate(read)
+
+    index = open_dataset(tiny_root)
+    by_chain = []
+    for scene_id in index.scene_ids():
+        with index.open_scene(scene_id) as reader:
+            for _, cube_points in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube)):
+                by_chain.extend(points.sar_db for points in cube_points)
+    by_chain = np.concatenate(by_chain)
+    assert np.isfinite(by_report).sum() > 100
+    assert set(np.round(by_report[np.isfinite(by_report)], 9)) == set(np.round(by_chain[np.isfinite(by_chain)], 9))
