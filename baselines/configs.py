@@ -15,16 +15,10 @@ from typing import Any
 
 from zendar_dataset.errors import ZendarError
 
-MODEL_NAMES = ("fpn-resnet34", "densenet-37", "densenet-67")
+from zendar_baselines.cnn.models import MODEL_NAMES
+from zendar_baselines.cnn.schedule import Schedule
 
-
-@dataclass(frozen=True)
-class Schedule:
-    """One training phase: Adam with a constant learning rate."""
-
-    lr: float
-    batch_size: int
-    epochs: int
+__all__ = ["CONFIGS", "MODEL_NAMES", "BenchConfig", "Schedule", "get_config"]
 
 
 @dataclass(frozen=True)

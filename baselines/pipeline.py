@@ -30,14 +30,14 @@ from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
 
-from zendar_baselines import cfar_baseline
+from zendar_baselines.classical import cfar_baseline
 from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import BenchConfig
-from zendar_baselines.label_quality import combine_quality, format_quality, mask_quality
-from zendar_baselines.masks import MaskParams, scene_masks
+from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
+from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.run_directory import read_json
-from zendar_baselines.side_store import AutoLabelStore
-from zendar_baselines.splits import SemiSupervisedSplit, make_split, read_split, write_split
+from zendar_baselines.labels.mask_store import MaskStore
+from zendar_baselines.labels.splits import SemiSupervisedSplit, make_split, read_split, write_split
 
 SPLIT_FILE = "split.json"
 STORE_DIR = "store"
@@ -90,7 +90,7 @@ def write_auto_labels(root: Path, scene_ids: list[str], out_dir: Path, *, qualit
     """
     index = open_dataset(str(root))
     parameters = mask_parameters()
-    store = AutoLabelStore.create(out_dir / STORE_DIR, root, parameters, code_version=code_version())
+    store = MaskStore.create(out_dir / STORE_DIR, root, parameters, code_version=code_version())
     scores = []
     for scene_id in tqdm(sorted(scene_ids), desc="automatic labels", unit="scene"):
         with index.open_scene(scene_id) as reader:
@@ -117,7 +117,7 @@ def write_label_masks(root: Path, split: SemiSupervisedSplit, step_dir: Path) ->
     split.check_manual_label_use(split.labelled)
     index = open_dataset(str(root))
     parameters = {**mask_parameters(), "kind": "labels"}
-    store = AutoLabelStore.create(step_dir / STORE_DIR, root, parameters, code_version=code_version())
+    store = MaskStore.create(step_dir / STORE_DIR, root, parameters, code_version=code_version())
     for scene_id in tqdm(split.labelled, desc="manual-label masks", unit="scene"):
         if store.has_scene(scene_id, parameters, code_version()):
             continue
@@ -134,7 +134,7 @@ def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
 
     Written once per scene and radar (atomically: temporary name, then rename) and reused.
     """
-    from zendar_baselines.inputs import log_power_maps
+    from zendar_baselines.cnn.maps import log_power_maps
 
     path = cache_dir / f"{reader.scene_id}__{radar}.npy"
     if not path.is_file():
@@ -159,10 +159,10 @@ def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
 def _frames(root: Path, scenes: list[str], store_dir: Path, window: int, cache_dir: Path):
     from torch.utils.data import ConcatDataset
 
-    from zendar_baselines.inputs import MaskFrames
+    from zendar_baselines.cnn.mask_frames import MaskFrames
 
     index = open_dataset(str(root))
-    store = AutoLabelStore.open(store_dir, root)
+    store = MaskStore.open(store_dir, root)
     parts = []
     for scene_id in scenes:
         masks = store.scene(scene_id)
@@ -184,8 +184,8 @@ def train_row(out_dir: Path, root: Path, config: BenchConfig, split: SemiSupervi
     every training scene's automatic masks with ``config.pretrain``, then the labelled part's
     manual masks with ``config.finetune`` starting from those weights.
     """
-    from zendar_baselines.models import build_model, parameter_count
-    from zendar_baselines.training import seed_everything, train
+    from zendar_baselines.cnn.models import build_model, parameter_count
+    from zendar_baselines.cnn.training import seed_everything, train
 
     split.check_manual_label_use(split.labelled)
     labelled = _frames(root, list(split.labelled), masks_dir / STORE_DIR, config.window, inputs_dir)
@@ -296,7 +296,7 @@ class ScoringScenes:
 
     def maps(self, scene: _ScoringScene, radar: str) -> np.ndarray:
         """Log-power maps ``[N, A, R, D]`` of one radar of ``scene`` (kept with the scene)."""
-        from zendar_baselines.inputs import log_power_maps
+        from zendar_baselines.cnn.maps import log_power_maps
 
         if radar not in scene.maps:
             maps = log_power_maps(scene.reader.array(f"radar/{radar}/cube"))
@@ -316,8 +316,8 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
     clustered with the other radar's points of the frame. ``scenes``: the test scenes shared with
     other scorings (:class:`ScoringScenes`); by default they are opened for this call only.
     """
-    from zendar_baselines.checkpoints import load_checkpoint, load_model_state
-    from zendar_baselines.models import build_model
+    from zendar_baselines.cnn.checkpoints import load_checkpoint, load_model_state
+    from zendar_baselines.cnn.models import build_model
 
     stored = load_checkpoint(checkpoint)  # SHA-256 against the manifest, once
     architecture = stored["architecture"]
@@ -340,8 +340,8 @@ def cnn_predictions(root: Path, config: BenchConfig, checkpoint: Path, device: s
 def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
                         name: str) -> dict[str, list[dict[str, float]]]:
     """Per test frame id, the detections of ``model``'s masks through the chain (see :func:`cnn_predictions`)."""
-    from zendar_baselines.inputs import stack_window
-    from zendar_baselines.training import predict_masks
+    from zendar_baselines.cnn.maps import stack_window
+    from zendar_baselines.cnn.training import predict_masks
 
     results: dict[str, list[dict[str, float]]] = {}
     with tqdm(desc=f"{name} test", unit="frame") as bar:

@@ -26,7 +26,7 @@ PAPER_AP_PERCENT: dict[tuple[str, bool, bool], tuple[float, float, float]] = {
     ("zoom-out DenseNet-67", True, True): (76.6, 67.6, 29.9),
 }
 
-#: Method names of Table 1 per architecture of ``zendar_baselines.models``.
+#: Method names of Table 1 per architecture of ``zendar_baselines.cnn.models``.
 METHOD_NAMES = {
     "cfar": "CFAR",
     "fpn-resnet34": "FPN ResNet-34",

@@ -2,7 +2,7 @@
 
 Per frame: read each radar's latest cube (two 256 x 64 x 4 cubes), CA-CFAR, Bartlett DOA of every
 peak, the SAR static-scene test against the frame's SAR images, DBSCAN and the detections, as
-``zendar_baselines.cfar_baseline.cfar_predictions`` runs them. A frame's time is the split's wall time
+``zendar_baselines.classical.cfar_baseline.cfar_predictions`` runs them. A frame's time is the split's wall time
 divided by its frames (a cube shared by consecutive frames is processed once); the process's CPU time
 per frame is printed too, as a loaded machine inflates it less. Stage shares come from one profiled
 pass (cProfile, cumulative).
@@ -21,7 +21,7 @@ import time
 
 from harness import print_environment, print_load_after, time_calls
 
-from zendar_baselines.cfar_baseline import cfar_predictions
+from zendar_baselines.classical.cfar_baseline import cfar_predictions
 
 TARGET_MS = 50.0
 STAGES = {

@@ -23,7 +23,7 @@ from torch.utils.flop_counter import FlopCounterMode
 from zendar_baselines.configs import get_config
 from zendar_dataset.sim.profiles import get_profile
 
-from zendar_baselines.models import build_model, parameter_count
+from zendar_baselines.cnn.models import build_model, parameter_count
 
 
 def train_flops_per_frame(name: str, in_channels: int, shape: tuple[int, int], width_scale: float) -> int:

@@ -8,7 +8,7 @@ Inputs: one demo scene of one radar: ``--frames`` maps of 4 antennas × 256 rang
 stacked K = 3 (12 channels, ``--frames - 2`` samples), masks with 1 % moving cells; batch 16, one
 epoch, Adam at lr 1e-3, as the demo config.
 
-1. Package: ``zendar_baselines.training.train`` (distributed sampler, masked loss, progress bar off,
+1. Package: ``zendar_baselines.cnn.training.train`` (distributed sampler, masked loss, progress bar off,
    one checkpoint written with its SHA-256 and manifest per call).
 2. Plain: the loop a user would write: ``DataLoader(shuffle=True)``, Adam, ``BCEWithLogits`` with the
    same positive weight and uncertain cells masked out, no checkpoint.
@@ -33,9 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from zendar_baselines.configs import MODEL_NAMES, Schedule  # noqa: E402
-from zendar_baselines.inputs import MaskFrames  # noqa: E402
-from zendar_baselines.models import build_model  # noqa: E402
-from zendar_baselines.training import positive_class_weight, seed_everything, train  # noqa: E402
+from zendar_baselines.cnn.maps import MaskFrames  # noqa: E402
+from zendar_baselines.cnn.models import build_model  # noqa: E402
+from zendar_baselines.cnn.training import positive_class_weight, seed_everything, train  # noqa: E402
 
 N_RX, N_RANGE, N_DOPPLER, WINDOW = 4, 256, 64, 3
 

@@ -9,7 +9,7 @@ import os
 import pytest
 import torch
 
-from zendar_baselines.checkpoints import (
+from zendar_baselines.cnn.checkpoints import (
     CHECKPOINT_FORMAT,
     MANIFEST_NAME,
     CheckpointError,

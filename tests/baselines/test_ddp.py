@@ -10,9 +10,9 @@ import pytest
 import torch
 import torch.multiprocessing as mp
 
-from zendar_baselines.checkpoints import MANIFEST_NAME, load_checkpoint
+from zendar_baselines.cnn.checkpoints import MANIFEST_NAME, load_checkpoint
 from zendar_baselines.configs import Schedule
-from zendar_baselines.inputs import MaskFrames
+from zendar_baselines.cnn.mask_frames import MaskFrames
 
 from tests.baselines.tiny_mask_model import TinyMaskNet, moving_target_task
 
@@ -27,7 +27,7 @@ def _data() -> MaskFrames:
 
 
 def _fresh_model() -> TinyMaskNet:
-    from zendar_baselines.training import seed_everything
+    from zendar_baselines.cnn.training import seed_everything
 
     seed_everything(0)
     return TinyMaskNet(in_channels=2)
@@ -45,7 +45,7 @@ def _worker(rank: int, world_size: int, port: int, out_dir: str, log_dir: str) -
     )
     os.environ.setdefault("GLOO_SOCKET_IFNAME", "lo")
     torch.set_num_threads(1)
-    import zendar_baselines.training as training
+    import zendar_baselines.cnn.training as training
 
     # Record which process writes checkpoints (rank 0 alone should).
     save = training.save_checkpoint
@@ -65,7 +65,7 @@ def _worker(rank: int, world_size: int, port: int, out_dir: str, log_dir: str) -
 @pytest.mark.slow  # two spawned interpreters importing torch: ~25 s on 2 cores
 def test_two_processes_match_one_process_on_the_global_batch(tmp_path):
     torch.set_num_threads(1)
-    from zendar_baselines.training import train
+    from zendar_baselines.cnn.training import train
 
     single_model = _fresh_model()
     single = train(single_model, _data(), SCHEDULE, seed=SEED, out_dir=tmp_path / "single", progress=False)

@@ -7,8 +7,8 @@ import pytest
 
 from zendar_dataset.errors import ZendarError
 
-from zendar_baselines.label_quality import combine_quality, format_quality, mask_quality
-from zendar_baselines.mask_classes import MOVING, UNCERTAIN
+from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
+from zendar_baselines.labels.mask_classes import MOVING, UNCERTAIN
 
 # One frame, 8 range bins x 8 Doppler bins; the last bin (70 m) is in no band.
 RANGE_M = np.array([5.0, 10.0, 14.0, 16.0, 20.0, 29.0, 35.0, 70.0])

@@ -11,8 +11,8 @@ import pytest
 from tests.detection.chain_helpers import T0_NS, parked_poses, radar_calibration, radar_params, sar_frame, sar_frames, simulate_cube
 from zendar_dataset.detection import ChainParams
 from zendar_dataset.detection.boxes import LabelBoxes
-from zendar_baselines.mask_classes import BACKGROUND, MOVING, UNCERTAIN
-from zendar_baselines.masks import MaskParams, auto_label_mask, grow_segments, scene_masks
+from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
+from zendar_baselines.labels.masks import MaskParams, auto_label_mask, grow_segments, scene_masks
 from zendar_dataset.detection.static_scene import SarTestParams
 from zendar_dataset.detection.locate import locate_cells
 from zendar_dataset.errors import ZendarError

@@ -11,11 +11,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from zendar_baselines import configs
-from zendar_baselines.models import MODEL_NAMES, build_model, parameter_count
-from zendar_baselines.models.common import GlobalPoolClassifier
-from zendar_baselines.models.densenet import DenseNetBackbone
-from zendar_baselines.models.fpn import FeaturePyramid
-from zendar_baselines.models.resnet import ResNet34Backbone
+from zendar_baselines.cnn.models import MODEL_NAMES, build_model, parameter_count
+from zendar_baselines.cnn.models.common import GlobalPoolClassifier
+from zendar_baselines.cnn.models.densenet import DenseNetBackbone
+from zendar_baselines.cnn.models.fpn import FeaturePyramid
+from zendar_baselines.cnn.models.resnet import ResNet34Backbone
 from zendar_dataset.errors import ZendarError
 
 EXPECTED_LAYERS = {"fpn-resnet34": 34, "densenet-37": 37, "densenet-67": 67}

@@ -12,7 +12,7 @@ import pytest
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sim.generate import synthesize_dataset
 
-from zendar_baselines.splits import ManualLabelLeakError, SplitError, make_split, read_split, write_split
+from zendar_baselines.labels.splits import ManualLabelLeakError, SplitError, make_split, read_split, write_split
 
 
 @pytest.fixture(scope="module")

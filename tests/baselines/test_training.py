@@ -11,10 +11,10 @@ import torch
 
 from zendar_dataset.errors import ZendarError
 
-from zendar_baselines.checkpoints import MANIFEST_NAME, load_checkpoint
+from zendar_baselines.cnn.checkpoints import MANIFEST_NAME, load_checkpoint
 from zendar_baselines.configs import Schedule
-from zendar_baselines.inputs import MaskFrames
-from zendar_baselines.training import (
+from zendar_baselines.cnn.mask_frames import MaskFrames
+from zendar_baselines.cnn.training import (
     checkpoint_path,
     masked_bce,
     positive_class_weight,
@@ -232,7 +232,7 @@ def test_predict_masks_is_the_sigmoid_of_the_logits():
 
 
 def test_densenet_37_trains_and_comes_back_from_its_checkpoint(tmp_path, task_data):
-    from zendar_baselines.models import build_model
+    from zendar_baselines.cnn.models import build_model
 
     seed_everything(0)
     model = build_model("densenet-37", in_channels=2, width_scale=0.25)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.detection.chain_helpers import T0_NS, driving_poses, parked_poses, radar_calibration, radar_params, sar_frames, simulate_cube
-from zendar_baselines.cfar_baseline import cfar_predictions
+from zendar_baselines.classical.cfar_baseline import cfar_predictions
 from zendar_dataset.detection import (
     ChainParams,
     CubePoints,

@@ -14,7 +14,7 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.schema import FORMAT_NAME, FORMAT_VERSION
 from zendar_dataset.temporary_files import forget, temporary_sibling
 
-from zendar_baselines.side_store import MANIFEST_FILENAME, AutoLabelStore, AutoLabelStoreError
+from zendar_baselines.labels.mask_store import MANIFEST_FILENAME, MaskStore, MaskStoreError
 
 PARAMETERS = {"drop_db": 6.0, "window_bins": [5, 3]}
 CODE = "0.1.0+test"
@@ -60,12 +60,12 @@ def dataset(tmp_path: Path) -> Path:
 
 def test_round_trip_and_manifest(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     written = {"scene-0000": radar_masks(0), "scene-0002": radar_masks(2, n_frames=3, shape=(7, 4))}
     for scene_id, masks in written.items():
         store.write_scene(scene_id, masks)
 
-    reopened = AutoLabelStore.open(out, dataset, parameters=PARAMETERS, code_version=CODE)
+    reopened = MaskStore.open(out, dataset, parameters=PARAMETERS, code_version=CODE)
     assert reopened.scene_ids() == ["scene-0000", "scene-0002"]
     for scene_id, masks in written.items():
         read = reopened.scene(scene_id)
@@ -91,29 +91,29 @@ def test_round_trip_and_manifest(dataset: Path, tmp_path: Path) -> None:
 
 def test_resume_keeps_finished_scenes(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0000", radar_masks(0))
+    MaskStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0000", radar_masks(0))
     # A later run with the same parameters (in another order and as a tuple) resumes.
-    resumed = AutoLabelStore.create(out, dataset, {"window_bins": (5, 3), "drop_db": 6.0}, code_version=CODE)
+    resumed = MaskStore.create(out, dataset, {"window_bins": (5, 3), "drop_db": 6.0}, code_version=CODE)
     assert resumed.has_scene("scene-0000", PARAMETERS, CODE)
     assert not resumed.has_scene("scene-0001", PARAMETERS, CODE)
     assert not resumed.has_scene("scene-0000", {**PARAMETERS, "drop_db": 3.0}, CODE)
     assert not resumed.has_scene("scene-0000", PARAMETERS, "0.1.0+other")
     resumed.write_scene("scene-0001", radar_masks(1))
-    assert AutoLabelStore.open(out, dataset).scene_ids() == ["scene-0000", "scene-0001"]
+    assert MaskStore.open(out, dataset).scene_ids() == ["scene-0000", "scene-0001"]
 
 
 @pytest.mark.parametrize("change", ["parameters", "code_version"])
 def test_other_parameters_or_code_start_over_inside_the_store(dataset: Path, tmp_path: Path, change: str) -> None:
     out = tmp_path / "autolabels"
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     store.write_scene("scene-0000", radar_masks(0))
     (out / "notes.txt").write_text("mine")
     parameters = {**PARAMETERS, "drop_db": 3.0} if change == "parameters" else PARAMETERS
     code = "0.1.0+edited" if change == "code_version" else CODE
 
-    with pytest.raises(AutoLabelStoreError, match=change):
-        AutoLabelStore.open(out, dataset, parameters=parameters, code_version=code)
-    restarted = AutoLabelStore.create(out, dataset, parameters, code_version=code)
+    with pytest.raises(MaskStoreError, match=change):
+        MaskStore.open(out, dataset, parameters=parameters, code_version=code)
+    restarted = MaskStore.create(out, dataset, parameters, code_version=code)
 
     assert restarted.scene_ids() == []
     assert not (out / "scene-0000.npz").exists()
@@ -123,33 +123,33 @@ def test_other_parameters_or_code_start_over_inside_the_store(dataset: Path, tmp
 
 def test_flipped_byte_in_scene_file_is_named(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     store.write_scene("scene-0000", radar_masks(0))
     path = out / "scene-0000.npz"
     data = bytearray(path.read_bytes())
     data[len(data) // 2] ^= 0x01
     path.write_bytes(bytes(data))
 
-    with pytest.raises(AutoLabelStoreError, match=r"scene-0000\.npz: SHA-256"):
-        AutoLabelStore.open(out, dataset)
-    with pytest.raises(AutoLabelStoreError, match=r"scene-0000\.npz: SHA-256"):
+    with pytest.raises(MaskStoreError, match=r"scene-0000\.npz: SHA-256"):
+        MaskStore.open(out, dataset)
+    with pytest.raises(MaskStoreError, match=r"scene-0000\.npz: SHA-256"):
         store.scene("scene-0000")
     assert not store.has_scene("scene-0000", PARAMETERS, CODE)
     # Opening without verification still works: reading the scene is what fails.
-    assert AutoLabelStore.open(out, verify=False).scene_ids() == ["scene-0000"]
+    assert MaskStore.open(out, verify=False).scene_ids() == ["scene-0000"]
 
 
 def test_every_damaged_scene_is_listed(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     for index, scene_id in enumerate(["scene-0000", "scene-0001", "scene-0002"]):
         store.write_scene(scene_id, radar_masks(index))
     (out / "scene-0000.npz").unlink()
     with open(out / "scene-0002.npz", "ab") as handle:
         handle.write(b"\0")
 
-    with pytest.raises(AutoLabelStoreError) as caught:
-        AutoLabelStore.open(out)
+    with pytest.raises(MaskStoreError) as caught:
+        MaskStore.open(out)
     problems = caught.value.problems
     assert len(problems) == 2
     assert "scene-0000.npz" in problems[0] and "found no file" in problems[0]
@@ -158,7 +158,7 @@ def test_every_damaged_scene_is_listed(dataset: Path, tmp_path: Path) -> None:
 
 def test_edited_manifest_is_refused(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0001", radar_masks(1))
+    MaskStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0001", radar_masks(1))
     manifest_path = out / MANIFEST_FILENAME
     original = json.loads(manifest_path.read_text())
 
@@ -166,29 +166,29 @@ def test_edited_manifest_is_refused(dataset: Path, tmp_path: Path) -> None:
     edited = json.loads(json.dumps(original))
     edited["scenes"]["scene-0001"]["radars"]["left"] = {"n_frames": 4, "shape": [4, 6, 6]}
     manifest_path.write_text(json.dumps(edited))
-    with pytest.raises(AutoLabelStoreError, match=r"scene-0001\.npz: left/masks: expected uint8 \[4, 6, 6\].*found uint8 \[4, 6, 5\]"):
-        AutoLabelStore.open(out)
+    with pytest.raises(MaskStoreError, match=r"scene-0001\.npz: left/masks: expected uint8 \[4, 6, 6\].*found uint8 \[4, 6, 5\]"):
+        MaskStore.open(out)
 
     edited = json.loads(json.dumps(original))
     edited["scenes"]["scene-0001"]["radars"]["right"]["n_frames"] = 5
     edited["scenes"]["scene-0001"]["file"] = "../elsewhere.npz"
     manifest_path.write_text(json.dumps(edited))
-    with pytest.raises(AutoLabelStoreError) as caught:
-        AutoLabelStore.open(out)
+    with pytest.raises(MaskStoreError) as caught:
+        MaskStore.open(out)
     assert len(caught.value.problems) == 2
     assert all(str(manifest_path) in problem for problem in caught.value.problems)
 
     manifest_path.write_text(json.dumps({**original, "format_version": 2}))
-    with pytest.raises(AutoLabelStoreError, match="format_version: expected 1, found 2"):
-        AutoLabelStore.open(out)
+    with pytest.raises(MaskStoreError, match="format_version: expected 1, found 2"):
+        MaskStore.open(out)
     before = snapshot(out)
-    with pytest.raises(AutoLabelStoreError, match="format_version"):
-        AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="format_version"):
+        MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     assert snapshot(out) == before
 
     manifest_path.write_text(json.dumps(original)[:-5])
-    with pytest.raises(AutoLabelStoreError, match=rf"{MANIFEST_FILENAME}: expected the auto-label store's JSON"):
-        AutoLabelStore.open(out)
+    with pytest.raises(MaskStoreError, match=rf"{MANIFEST_FILENAME}: expected the auto-label store's JSON"):
+        MaskStore.open(out)
 
 
 def test_foreign_directory_is_left_untouched(dataset: Path, tmp_path: Path) -> None:
@@ -199,15 +199,15 @@ def test_foreign_directory_is_left_untouched(dataset: Path, tmp_path: Path) -> N
     (out / ".hidden").write_text("x")
     before = snapshot(out)
 
-    with pytest.raises(AutoLabelStoreError, match=r"holds someone else's files \(3: \.hidden, 2019, scene-0000\.npz\)"):
-        AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match=r"holds someone else's files \(3: \.hidden, 2019, scene-0000\.npz\)"):
+        MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     assert snapshot(out) == before
 
     # Someone else's manifest.json is not ours either.
     (out / MANIFEST_FILENAME).write_text(json.dumps({"format": "photo-album"}))
     before = snapshot(out)
-    with pytest.raises(AutoLabelStoreError, match="someone else's files"):
-        AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="someone else's files"):
+        MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     assert snapshot(out) == before
 
 
@@ -215,26 +215,26 @@ def test_out_dir_inside_dataset_is_refused(dataset: Path) -> None:
     before = snapshot(dataset)
     for inside in (dataset, dataset / "autolabels", dataset / "scenes" / "x"):
         with pytest.raises(ZendarError, match="inside the dataset"):
-            AutoLabelStore.create(inside, dataset, PARAMETERS, code_version=CODE)
+            MaskStore.create(inside, dataset, PARAMETERS, code_version=CODE)
     assert snapshot(dataset) == before
 
 
 def test_store_of_another_dataset_is_refused(dataset: Path, tmp_path: Path) -> None:
     other = make_dataset(tmp_path / "other", ["scene-0000"], name="other")
     out = tmp_path / "autolabels"
-    AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0000", radar_masks(0))
+    MaskStore.create(out, dataset, PARAMETERS, code_version=CODE).write_scene("scene-0000", radar_masks(0))
     before = snapshot(out)
 
-    with pytest.raises(AutoLabelStoreError, match="made from another dataset"):
-        AutoLabelStore.create(out, other, PARAMETERS, code_version=CODE)
-    with pytest.raises(AutoLabelStoreError, match="made from another dataset"):
-        AutoLabelStore.open(out, other)
+    with pytest.raises(MaskStoreError, match="made from another dataset"):
+        MaskStore.create(out, other, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="made from another dataset"):
+        MaskStore.open(out, other)
     assert snapshot(out) == before
 
 
 def test_bad_scene_input_lists_every_problem_and_writes_nothing(dataset: Path, tmp_path: Path) -> None:
     out = tmp_path / "autolabels"
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     before = snapshot(out)
     masks = np.zeros((3, 4, 5), np.uint8)
     masks[0, 1, 2] = 3
@@ -244,7 +244,7 @@ def test_bad_scene_input_lists_every_problem_and_writes_nothing(dataset: Path, t
         "a/b": (np.array([1]), np.zeros((1, 4, 5), np.uint8)),
         "top": (np.array([1, 2]), np.zeros((3, 4, 5), np.uint8)),
     }
-    with pytest.raises(AutoLabelStoreError) as caught:
+    with pytest.raises(MaskStoreError) as caught:
         store.write_scene("scene-0009", bad)
     problems = caught.value.problems
     assert len(problems) == 6
@@ -258,19 +258,19 @@ def test_bad_scene_input_lists_every_problem_and_writes_nothing(dataset: Path, t
 
 
 def test_missing_store_and_missing_scene_are_named(dataset: Path, tmp_path: Path) -> None:
-    with pytest.raises(AutoLabelStoreError, match="expected a directory, found nothing"):
-        AutoLabelStore.open(tmp_path / "nowhere")
+    with pytest.raises(MaskStoreError, match="expected a directory, found nothing"):
+        MaskStore.open(tmp_path / "nowhere")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(AutoLabelStoreError, match=rf"empty/{MANIFEST_FILENAME}: expected the auto-label store's"):
-        AutoLabelStore.open(tmp_path / "empty")
-    store = AutoLabelStore.create(tmp_path / "empty", dataset, PARAMETERS, code_version=CODE)
-    with pytest.raises(AutoLabelStoreError, match="holds no labels of scene 'scene-0001'"):
+    with pytest.raises(MaskStoreError, match=rf"empty/{MANIFEST_FILENAME}: expected the auto-label store's"):
+        MaskStore.open(tmp_path / "empty")
+    store = MaskStore.create(tmp_path / "empty", dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="holds no labels of scene 'scene-0001'"):
         store.scene("scene-0001")
     (tmp_path / "a-file").write_text("x")
-    with pytest.raises(AutoLabelStoreError, match="a-file/autolabels: cannot be created"):
-        AutoLabelStore.create(tmp_path / "a-file" / "autolabels", dataset, PARAMETERS, code_version=CODE)
-    with pytest.raises(AutoLabelStoreError, match="a-file: exists and is not a directory"):
-        AutoLabelStore.create(tmp_path / "a-file", dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="a-file/autolabels: cannot be created"):
+        MaskStore.create(tmp_path / "a-file" / "autolabels", dataset, PARAMETERS, code_version=CODE)
+    with pytest.raises(MaskStoreError, match="a-file: exists and is not a directory"):
+        MaskStore.create(tmp_path / "a-file", dataset, PARAMETERS, code_version=CODE)
 
 
 def test_interrupted_run_leftovers_are_cleared(dataset: Path, tmp_path: Path) -> None:
@@ -280,12 +280,12 @@ def test_interrupted_run_leftovers_are_cleared(dataset: Path, tmp_path: Path) ->
     leftover = temporary_sibling(out / MANIFEST_FILENAME)
     leftover.write_text("{")
     forget(leftover)
-    store = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    store = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     assert sorted(os.listdir(out)) == [MANIFEST_FILENAME]
 
     # Killed between a scene file's rename and the manifest update: the scene is not counted as done.
     store.write_scene("scene-0000", radar_masks(0))
     (out / "scene-0001.npz").write_bytes((out / "scene-0000.npz").read_bytes())
-    resumed = AutoLabelStore.create(out, dataset, PARAMETERS, code_version=CODE)
+    resumed = MaskStore.create(out, dataset, PARAMETERS, code_version=CODE)
     assert resumed.scene_ids() == ["scene-0000"]
     assert not resumed.has_scene("scene-0001", PARAMETERS, CODE)

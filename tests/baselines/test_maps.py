@@ -13,7 +13,8 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim.generate import synthesize_dataset
 
-from zendar_baselines.inputs import DB_SCALE, MaskFrames, log_power_maps, stack_window
+from zendar_baselines.cnn.maps import DB_SCALE, log_power_maps, stack_window
+from zendar_baselines.cnn.mask_frames import MaskFrames
 
 
 def test_stack_window_by_hand():

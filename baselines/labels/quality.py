@@ -30,7 +30,7 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BANDS_M
 from zendar_dataset.eval.report import format_percent
 
-from zendar_baselines.mask_classes import BACKGROUND, MASK_CLASSES, MOVING, UNCERTAIN
+from zendar_baselines.labels.mask_classes import BACKGROUND, MASK_CLASSES, MOVING, UNCERTAIN
 
 COUNT_NAMES = (
     "cells",

@@ -12,15 +12,46 @@ the CUDA build of libtorch and fails to import beside the CPU build
 
 from __future__ import annotations
 
-from torch import nn
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-from zendar_baselines.configs import MODEL_NAMES
-from zendar_baselines.models.common import check_in_channels, check_width_scale
-from zendar_baselines.models.densenet import DENSENET_BLOCK_LAYERS, ZoomOutDenseNet
-from zendar_baselines.models.fpn import FpnResNet34
 from zendar_dataset.errors import ZendarError
 
-__all__ = ["MODEL_NAMES", "FpnResNet34", "ZoomOutDenseNet", "build_model", "parameter_count"]
+if TYPE_CHECKING:
+    from torch import nn
+
+__all__ = ["MODEL_BUILDERS", "MODEL_NAMES", "build_model", "densenet37", "densenet67", "fpn_resnet34", "parameter_count"]
+
+
+# The builders import torch when called, so that naming a model (configs, command lines) stays light.
+def fpn_resnet34(in_channels: int, width_scale: float = 1.0) -> nn.Module:
+    """FPN on a ResNet-34 backbone (:class:`zendar_baselines.cnn.models.fpn.FpnResNet34`)."""
+    from zendar_baselines.cnn.models.fpn import FpnResNet34
+
+    return FpnResNet34(in_channels, width_scale)
+
+
+def densenet37(in_channels: int, width_scale: float = 1.0) -> nn.Module:
+    """Zoom-out DenseNet-37: dense blocks of 6 and 11 layers, growth rate 32."""
+    from zendar_baselines.cnn.models.densenet import DENSENET_BLOCK_LAYERS, ZoomOutDenseNet
+
+    return ZoomOutDenseNet(in_channels, DENSENET_BLOCK_LAYERS["densenet-37"], growth_rate=32, width_scale=width_scale)
+
+
+def densenet67(in_channels: int, width_scale: float = 1.0) -> nn.Module:
+    """Zoom-out DenseNet-67: dense blocks of 3, 6, 13 and 9 layers, growth rate 32."""
+    from zendar_baselines.cnn.models.densenet import DENSENET_BLOCK_LAYERS, ZoomOutDenseNet
+
+    return ZoomOutDenseNet(in_channels, DENSENET_BLOCK_LAYERS["densenet-67"], growth_rate=32, width_scale=width_scale)
+
+
+#: The models' names and builders (as torchvision's registry): configs refer to these names.
+MODEL_BUILDERS: dict[str, Callable[[int, float], nn.Module]] = {
+    "fpn-resnet34": fpn_resnet34,
+    "densenet-37": densenet37,
+    "densenet-67": densenet67,
+}
+MODEL_NAMES = tuple(MODEL_BUILDERS)
 
 
 def build_model(name: str, in_channels: int, width_scale: float = 1.0) -> nn.Module:
@@ -46,14 +77,13 @@ def build_model(name: str, in_channels: int, width_scale: float = 1.0) -> nn.Mod
     ZendarError
         For an unknown name (naming the choices), a non-positive ``in_channels`` or ``width_scale``.
     """
-    if name not in MODEL_NAMES:
+    from zendar_baselines.cnn.models.common import check_in_channels, check_width_scale
+
+    if name not in MODEL_BUILDERS:
         raise ZendarError(f"unknown model {name!r}: choose one of {', '.join(MODEL_NAMES)}")
     check_in_channels(in_channels)
     width_scale = check_width_scale(width_scale)
-    if name == "fpn-resnet34":
-        model: nn.Module = FpnResNet34(in_channels, width_scale)
-    else:
-        model = ZoomOutDenseNet(in_channels, DENSENET_BLOCK_LAYERS[name], growth_rate=32, width_scale=width_scale)
+    model = MODEL_BUILDERS[name](in_channels, width_scale)
     model.architecture = {"name": name, "in_channels": in_channels, "width_scale": width_scale}
     return model
 

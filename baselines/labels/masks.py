@@ -1,6 +1,6 @@
 """Per-cube range-Doppler masks: the CNNs' targets (paper §2.3, Fig. 2).
 
-A mask is uint8 ``[R, D]`` of the classes of :mod:`zendar_baselines.mask_classes`: ``BACKGROUND``,
+A mask is uint8 ``[R, D]`` of the classes of :mod:`zendar_baselines.labels.mask_classes`: ``BACKGROUND``,
 ``MOVING`` or ``UNCERTAIN`` (a cell the loss should not count). Both kinds start from the CA-CFAR peaks of the cube and grow each chosen
 peak into its *segment* (:func:`grow_segments`): the cells around it that belong to the same
 response, so that the target covers a peak's main lobe and not one cell.
@@ -27,7 +27,7 @@ import numpy as np
 import scipy.ndimage
 from tqdm import tqdm
 
-from zendar_baselines.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
+from zendar_baselines.labels.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
 from zendar_dataset.detection import (
     ON_CAR_MARGIN_M,
     ChainParams,
@@ -193,7 +193,7 @@ def auto_label_mask(
     Returns
     -------
     numpy.ndarray
-        ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.mask_classes`.
+        ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.labels.mask_classes`.
     """
     params = MaskParams() if params is None else params
     cells, power_db, floor_db = _power_db_and_floor(cube, params)
@@ -234,7 +234,7 @@ def label_mask(
     Returns
     -------
     numpy.ndarray
-        ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.mask_classes`.
+        ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.labels.mask_classes`.
     """
     params = MaskParams() if params is None else params
     cells, power_db, floor_db = _power_db_and_floor(cube, params)

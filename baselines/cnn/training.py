@@ -41,7 +41,7 @@ from tqdm.auto import tqdm
 
 from zendar_dataset.errors import ZendarError
 
-from zendar_baselines.checkpoints import (
+from zendar_baselines.cnn.checkpoints import (
     CheckpointIntegrityError,
     load_checkpoint,
     load_model_state,
@@ -51,8 +51,8 @@ from zendar_baselines.checkpoints import (
 )
 from zendar_baselines.code_version import code_version
 from zendar_baselines.configs import Schedule
-from zendar_baselines.inputs import MaskFrames
-from zendar_baselines.mask_classes import BACKGROUND, MOVING, UNCERTAIN
+from zendar_baselines.cnn.mask_frames import MaskFrames
+from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 
 MAX_POS_WEIGHT = 100.0
 _CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")

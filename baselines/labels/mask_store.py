@@ -17,7 +17,7 @@ Layout of the store directory::
 
 Every file is written under a temporary name and renamed into place, and the manifest is rewritten
 after each scene, so a run stopped at any point keeps every scene it finished. The store belongs to
-one dataset (its fingerprint), one set of parameters and one code version: :meth:`AutoLabelStore.create`
+one dataset (its fingerprint), one set of parameters and one code version: :meth:`MaskStore.create`
 on a store made with other parameters or code starts it over (removing only the scene files its own
 manifest lists); a directory without our manifest, a store of another dataset and a store of another
 format version are refused with nothing touched. One process writes a store at a time.
@@ -46,7 +46,7 @@ from zendar_dataset.temporary_files import owner_pid, remove_stale_temporaries
 
 from zendar_baselines.code_version import code_version as current_code_version
 from zendar_baselines.fingerprints import SHA256_HEX, dataset_fingerprint
-from zendar_baselines.mask_classes import MASK_CLASSES, MASK_DTYPE
+from zendar_baselines.labels.mask_classes import MASK_CLASSES, MASK_DTYPE
 
 FORMAT_NAME = "zendar-autolabels"
 FORMAT_VERSION = 1
@@ -57,13 +57,13 @@ _FOREIGN_SHOWN = 5
 RadarMasks = dict[str, tuple[np.ndarray, np.ndarray]]
 
 
-class AutoLabelStoreError(ZendarError):
+class MaskStoreError(ZendarError):
     """An automatic-label store cannot be used; ``problems`` lists every problem found."""
 
 
 def _raise_problems(problems: list[str]) -> None:
     if problems:
-        raise AutoLabelStoreError("; ".join(problems), problems)
+        raise MaskStoreError("; ".join(problems), problems)
 
 
 def _valid_name(name: Any) -> bool:
@@ -90,7 +90,7 @@ def _make_directory(out: Path) -> None:
     try:
         prepare_out_dir(out)
     except OSError as exc:
-        raise AutoLabelStoreError(f"auto-label store {out}: cannot be created ({exc.strerror or exc})") from None
+        raise MaskStoreError(f"auto-label store {out}: cannot be created ({exc.strerror or exc})") from None
 
 
 def _created_utc() -> str:
@@ -101,9 +101,9 @@ def _read_manifest(path: Path) -> Any:
     try:
         return json.loads(path.read_bytes().decode("utf-8"))
     except FileNotFoundError:
-        raise AutoLabelStoreError(f"{path}: expected the auto-label store's {MANIFEST_FILENAME}, found none") from None
+        raise MaskStoreError(f"{path}: expected the auto-label store's {MANIFEST_FILENAME}, found none") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        raise AutoLabelStoreError(f"{path}: expected the auto-label store's JSON manifest, found unreadable content ({exc})") from None
+        raise MaskStoreError(f"{path}: expected the auto-label store's JSON manifest, found unreadable content ({exc})") from None
 
 
 def _check_shape(value: Any, n_frames: Any) -> bool:
@@ -258,7 +258,7 @@ def _radar_masks_problems(scene_id: str, radar_masks: Any) -> list[str]:
     return problems
 
 
-class AutoLabelStore:
+class MaskStore:
     """Automatic labels of a dataset's scenes, one ``.npz`` file per scene and a manifest.
 
     Open one with :meth:`create` (to write) or :meth:`open` (to read); the constructor is internal.
@@ -277,7 +277,7 @@ class AutoLabelStore:
         self._dataset_scene_ids = dataset_scene_ids
 
     def __repr__(self) -> str:
-        return f"AutoLabelStore({str(self.directory)!r}, scenes={len(self.manifest['scenes'])})"
+        return f"MaskStore({str(self.directory)!r}, scenes={len(self.manifest['scenes'])})"
 
     @property
     def manifest_path(self) -> Path:
@@ -311,7 +311,7 @@ class AutoLabelStore:
         parameters: Mapping[str, Any],
         *,
         code_version: str | None = None,
-    ) -> "AutoLabelStore":
+    ) -> "MaskStore":
         """Start a store in ``out_dir``, or resume the one there.
 
         Parameters
@@ -327,7 +327,7 @@ class AutoLabelStore:
 
         Returns
         -------
-        AutoLabelStore
+        MaskStore
             Resumed (its finished scenes kept) when ``out_dir`` holds a store of the same dataset,
             parameters and code version; started over (its own scene files removed) when the
             parameters or the code version differ.
@@ -356,26 +356,26 @@ class AutoLabelStore:
         }
         store = cls(out, fresh, frozenset(dataset.scene_ids()))
         if out.exists() and not out.is_dir():
-            raise AutoLabelStoreError(f"auto-label store {out}: exists and is not a directory")
+            raise MaskStoreError(f"auto-label store {out}: exists and is not a directory")
         manifest_path = out / MANIFEST_FILENAME
         if out.is_dir() and not manifest_path.exists():
             foreign = sorted(entry for entry in os.listdir(out) if owner_pid(out / entry) is None)
             if foreign:
                 shown = ", ".join(foreign[:_FOREIGN_SHOWN]) + (", ..." if len(foreign) > _FOREIGN_SHOWN else "")
-                raise AutoLabelStoreError(
+                raise MaskStoreError(
                     f"auto-label store {out}: holds someone else's files ({len(foreign)}: {shown}) and no "
                     f"{MANIFEST_FILENAME}; choose an empty or new directory (nothing was changed)"
                 )
         if manifest_path.exists():
             recorded = _read_manifest(manifest_path)
             if isinstance(recorded, dict) and recorded.get("format") != FORMAT_NAME:
-                raise AutoLabelStoreError(
+                raise MaskStoreError(
                     f"auto-label store {out}: holds someone else's files ({MANIFEST_FILENAME} of format "
                     f"{recorded.get('format')!r}); choose an empty or new directory (nothing was changed)"
                 )
             _raise_problems(check_manifest(recorded, str(manifest_path)))
             if recorded["dataset"]["fingerprint"] != fingerprint:
-                raise AutoLabelStoreError(
+                raise MaskStoreError(
                     f"auto-label store {out}: made from another dataset ({recorded['dataset']['root']}, "
                     f"dataset.json SHA-256 {recorded['dataset']['fingerprint'][:12]}...), not {dataset_root} "
                     f"({fingerprint[:12]}...); choose another directory (nothing was changed)"
@@ -406,7 +406,7 @@ class AutoLabelStore:
         verify: bool = True,
         parameters: Mapping[str, Any] | None = None,
         code_version: str | None = None,
-    ) -> "AutoLabelStore":
+    ) -> "MaskStore":
         """Open a store to read it (or to add scenes).
 
         Parameters
@@ -423,7 +423,7 @@ class AutoLabelStore:
 
         Raises
         ------
-        AutoLabelStoreError
+        MaskStoreError
             Listing every problem found: no store there, a manifest of another format or version
             or unreadable, another dataset, other parameters or code version, a scene file missing,
             changed or not matching its manifest entry.
@@ -431,7 +431,7 @@ class AutoLabelStore:
         out = Path(out_dir)
         manifest_path = out / MANIFEST_FILENAME
         if not out.is_dir():
-            raise AutoLabelStoreError(f"auto-label store {out}: expected a directory, found {'a file' if out.exists() else 'nothing'}")
+            raise MaskStoreError(f"auto-label store {out}: expected a directory, found {'a file' if out.exists() else 'nothing'}")
         manifest = _read_manifest(manifest_path)
         _raise_problems(check_manifest(manifest, str(manifest_path)))
         problems = []
@@ -470,7 +470,7 @@ class AutoLabelStore:
         return _file_problems(path, data, self.manifest["scenes"][scene_id]), data
 
     def verify(self) -> None:
-        """Check every scene file against the manifest; AutoLabelStoreError listing every problem."""
+        """Check every scene file against the manifest; MaskStoreError listing every problem."""
         problems = []
         for scene_id in self.manifest["scenes"]:
             problems += self._scene_file_problems(scene_id)[0]
@@ -501,7 +501,7 @@ class AutoLabelStore:
 
         Raises
         ------
-        AutoLabelStoreError
+        MaskStoreError
             Listing every problem with the scene id or the arrays; nothing is written then.
         """
         problems = []
@@ -538,12 +538,12 @@ class AutoLabelStore:
 
         Raises
         ------
-        AutoLabelStoreError
+        MaskStoreError
             Naming the file when it is missing, changed or does not hold what the manifest says,
             or naming the store when the scene is not in it.
         """
         if scene_id not in self.manifest["scenes"]:
-            raise AutoLabelStoreError(
+            raise MaskStoreError(
                 f"auto-label store {self.directory}: holds no labels of scene {scene_id!r} "
                 f"(it holds {len(self.manifest['scenes'])} scenes: {self.scene_ids()})"
             )
@@ -563,7 +563,7 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MANIFEST_FILENAME",
-    "AutoLabelStore",
-    "AutoLabelStoreError",
+    "MaskStore",
+    "MaskStoreError",
     "check_manifest",
 ]

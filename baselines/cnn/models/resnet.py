@@ -6,7 +6,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from zendar_baselines.models.common import scaled_width
+from zendar_baselines.cnn.models.common import scaled_width
 from zendar_dataset.errors import ZendarError
 
 RESNET34_BLOCKS = (3, 4, 6, 3)

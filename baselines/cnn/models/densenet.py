@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from zendar_baselines.models.common import (
+from zendar_baselines.cnn.models.common import (
     check_in_channels,
     check_input,
     check_width_scale,
@@ -28,7 +28,7 @@ from zendar_baselines.models.common import (
     pad_to_multiple,
     scaled_width,
 )
-from zendar_baselines.models.resnet import stem
+from zendar_baselines.cnn.models.resnet import stem
 from zendar_dataset.errors import ZendarError
 
 DENSENET_BLOCK_LAYERS: dict[str, tuple[int, ...]] = {

@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from zendar_baselines.models.common import (
+from zendar_baselines.cnn.models.common import (
     check_in_channels,
     check_input,
     check_width_scale,
@@ -17,7 +17,7 @@ from zendar_baselines.models.common import (
     pad_to_multiple,
     scaled_width,
 )
-from zendar_baselines.models.resnet import BasicBlock, ResNet34Backbone
+from zendar_baselines.cnn.models.resnet import BasicBlock, ResNet34Backbone
 
 FPN_CHANNELS = 256
 HEAD_CHANNELS = 128
