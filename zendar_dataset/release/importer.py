@@ -15,7 +15,7 @@ import os
 import pathlib
 import re
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,10 +30,10 @@ from zendar_dataset.release.discover import SceneSource, find_scenes
 from zendar_dataset.release.messages import RD_MODEL
 from zendar_dataset.release.pixel_order import vote_pixel_order
 from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
+from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
 from zendar_dataset.release.wire import WireError, decode
 
 SPEED_OF_LIGHT_MPS = 299_792_458.0
-SUMMARY_JSON = "release_import.json"
 # Radar numbers used only when a radar has no RangeDopplerImageModel (format v1 requires them).
 PAPER_CENTER_FREQUENCY_HZ = 77e9
 PAPER_RANGE_BIN_M = 0.176
@@ -43,66 +43,6 @@ EGO_Q_IMU_WXYZ = (0.0, 1.0, 0.0, 0.0)
 # A radar looking to the ego's left (+y) or right (-y): its boresight x turned by +-90 degrees about z.
 SIDE_Q_WXYZ = {"left": (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)), "right": (np.sqrt(0.5), 0.0, 0.0, -np.sqrt(0.5))}
 _SIDE_WORD = re.compile(r"(?:^|[_\W])(left|right)(?:$|[_\W])", re.IGNORECASE)
-
-
-@dataclass
-class StreamSummary:
-    """What happened to one stream file."""
-
-    path: str
-    kind: str | None = None
-    framing: str | None = None
-    records: int = 0
-    empty_records: int = 0
-    written_to: str | None = None
-    skipped: list[str] = field(default_factory=list)
-    lost_bytes: int = 0
-    notes: list[str] = field(default_factory=list)
-
-
-@dataclass
-class SceneSummary:
-    """One scene: where it went, its streams and the assumptions made."""
-
-    scene_id: str
-    source: str
-    status: str = "imported"  # or "already imported"
-    streams: list[StreamSummary] = field(default_factory=list)
-    assumptions: list[str] = field(default_factory=list)
-
-
-@dataclass
-class ImportSummary:
-    """The whole import, printable with :meth:`lines` and saved as ``release_import.json``."""
-
-    source: str
-    out: str
-    scenes: list[SceneSummary] = field(default_factory=list)
-
-    def lines(self) -> list[str]:
-        out = []
-        n_streams = sum(len(s.streams) for s in self.scenes)
-        n_records = sum(st.records for s in self.scenes for st in s.streams)
-        out.append(f"{self.source}: {len(self.scenes)} scenes, {n_streams} streams, {n_records} records read -> {self.out}")
-        for scene in self.scenes:
-            out.append(f"scene {scene.scene_id} ({scene.status}) from {scene.source}")
-            for st in scene.streams:
-                target = f" -> {st.written_to}" if st.written_to else ""
-                out.append(f"  {st.path}: {st.kind or '?'}, {st.records} records{target}; framing {st.framing}")
-                for note in st.notes:
-                    out.append(f"    kind: {note}")
-                if st.empty_records:
-                    out.append(f"    {st.empty_records} empty records (length 0) skipped")
-                if st.lost_bytes:
-                    out.append(f"    lost {st.lost_bytes} bytes to --skip-corrupt")
-                for reason in st.skipped:
-                    out.append(f"    skipped: {reason}")
-            for assumption in scene.assumptions:
-                out.append(f"  assumed: {assumption}")
-        return out
-
-    def to_json(self) -> dict:
-        return asdict(self)
 
 
 @dataclass
