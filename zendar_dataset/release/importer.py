@@ -10,6 +10,7 @@ and in the scene's root attribute ``release_import``.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import pathlib
@@ -19,30 +20,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format.schema import DATASET_JSON, SPLITS
-from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.format.writer import DatasetWriter
-from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
 from zendar_dataset.geometry.geodesy import LocalENU
+from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
 from zendar_dataset.release.discover import SceneSource, find_scenes
 from zendar_dataset.release.messages import RD_MODEL
 from zendar_dataset.release.pixel_order import vote_pixel_order
 from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
-from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
+from zendar_dataset.release.summary import (
+    SUMMARY_JSON,
+    ImportSummary,
+    SceneSummary,
+    StreamSummary,
+)
 from zendar_dataset.release.wire import WireError, decode
-
-SPEED_OF_LIGHT_MPS = 299_792_458.0
-# Radar numbers used only when a radar has no RangeDopplerImageModel (format v1 requires them).
-PAPER_CENTER_FREQUENCY_HZ = 77e9
-PAPER_RANGE_BIN_M = 0.176
-PLACEHOLDER_DOPPLER_BIN_MPS = 0.1
-# IMU frame (forward, right, down) -> ego frame (forward, left, up): 180 degrees about x.
-EGO_Q_IMU_WXYZ = (0.0, 1.0, 0.0, 0.0)
-# A radar looking to the ego's left (+y) or right (-y): its boresight x turned by +-90 degrees about z.
-SIDE_Q_WXYZ = {"left": (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)), "right": (np.sqrt(0.5), 0.0, 0.0, -np.sqrt(0.5))}
-_SIDE_WORD = re.compile(r"(?:^|[_\W])(left|right)(?:$|[_\W])", re.IGNORECASE)
 
 
 @dataclass
@@ -112,6 +107,12 @@ def _decoded(opened: _Opened, probe: bool = False):
                 opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
 
 
+def _sar_frames(opened: _Opened):
+    """The SAR frames of an ``Image`` stream, in a probe pass (the writing pass counts and reports)."""
+    for _, record in _decoded(opened, probe=True):
+        yield rec.sar_frame(opened.stream.kind, record)
+
+
 class _Stamps:
     """Strictly increasing int64 ns per output stream; records out of order are skipped with a reason."""
 
@@ -171,147 +172,8 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
         first.summary.skipped.append("no usable pose")
         return None
     first.summary.written_to = "tracklog"
-    scene.assumptions.append("Position.attitude rotates IMU (forward, right, down) vectors into ECEF; quaternions normalised")
+    scene.assumptions.append(assume.TRACKLOG_ATTITUDE)
     return np.asarray(t, np.int64), p, q
-
-
-def _infer_sides(images: dict[str, _Opened], scene: SceneSummary) -> dict[str, str]:
-    """Serial -> "left"/"right" from where each radar's images lie relative to the vehicle.
-
-    The image centre, moved into the vehicle (IMU: forward, right, down) frame with the
-    image's own pose, has y > 0 on the right.  Named sides are used only when exactly one
-    serial falls on each side.
-    """
-    sides: dict[str, str] = {}
-    evidence = {}
-    for serial, opened in images.items():
-        right = []
-        for _, record in _decoded(opened, probe=True):
-            frame = rec.sar_frame(opened.stream.kind, record)
-            centre = frame.origin_ecef + frame.rows / 2 * frame.di_ecef + frame.cols / 2 * frame.dj_ecef
-            q = frame.attitude_wxyz
-            if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(q)) and np.all(np.isfinite(frame.position_ecef))):
-                continue
-            offset_imu = quat_wxyz_to_matrix(q / np.linalg.norm(q)).T @ (centre - frame.position_ecef)
-            right.append(offset_imu[1])
-            if len(right) >= 20:
-                break
-        if right:
-            lateral = float(np.median(right))
-            sides[serial] = "right" if lateral > 0 else "left"
-            evidence[serial] = lateral
-    named = sorted(sides.values())
-    if len(sides) != len(images) or len(set(named)) != len(named):
-        scene.assumptions.append(
-            f"serial -> side: not inferable (lateral image offsets {evidence}); radars keep their serials as names"
-        )
-        return {}
-    for serial, side in sorted(sides.items()):
-        scene.assumptions.append(
-            f"serial {serial} -> {side!r}: inferred from its SAR images lying {abs(evidence[serial]):.1f} m to the "
-            f"{side} of the vehicle (median over the first frames); not stated by the release"
-        )
-    return sides
-
-
-def _enu_origin(tracklog, images: dict[str, _Opened], scene: SceneSummary) -> dict:
-    anchor = None
-    if tracklog is not None:
-        anchor, what = tracklog[1][0], "the first tracklog position"
-    else:
-        for opened in images.values():
-            for _, record in _decoded(opened, probe=True):
-                frame = rec.sar_frame(opened.stream.kind, record)
-                if np.all(np.isfinite(frame.origin_ecef)):
-                    anchor, what = frame.origin_ecef, "the first SAR image origin"
-                    break
-            if anchor is not None:
-                break
-    if anchor is None:
-        scene.assumptions.append("enu_origin: nothing geolocated in the scene; (0, 0, 0) used")
-        return {"lat_deg": 0.0, "lon_deg": 0.0, "height_m": 0.0}
-    lat, lon, height = (float(np.asarray(v).reshape(-1)[0]) for v in ecef_to_geodetic(np.asarray(anchor).reshape(1, 3)))
-    scene.assumptions.append(f"enu_origin: {what}")
-    return {"lat_deg": lat, "lon_deg": lon, "height_m": height}
-
-
-PAPER_CUBE_SHAPE = (512, 256, 4)  # paper §3.1: range bins, Doppler bins, receive channels
-
-
-def _paper_model() -> rec.RangeDopplerModel:
-    """The paper's cube layout for frames that come without a model: 512 × 0.176 m range bins, 256 Doppler
-    bins centred on zero (bin size a placeholder) and 4 receivers half a wavelength apart along the
-    release radar frame's x (left) axis (placeholder positions)."""
-    r, d, a = PAPER_CUBE_SHAPE
-    wavelength = SPEED_OF_LIGHT_MPS / PAPER_CENTER_FREQUENCY_HZ
-    rx = np.column_stack([np.arange(a) * wavelength / 2, np.zeros(a), np.zeros(a)])
-    return rec.RangeDopplerModel(
-        a, (0.0, PAPER_RANGE_BIN_M, r), (-(d // 2) * PLACEHOLDER_DOPPLER_BIN_MPS, PLACEHOLDER_DOPPLER_BIN_MPS, d), rx, wavelength
-    )
-
-
-def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSummary, assumed_model: bool = False) -> dict:
-    side = name if name in SIDE_Q_WXYZ else None
-    rotation = list(SIDE_Q_WXYZ[side]) if side else [1.0, 0.0, 0.0, 0.0]
-    scene.assumptions.append(
-        f"radar {name!r} pose in the ego frame: "
-        + (f"looking to the {side} (boresight along ego {'+' if side == 'left' else '-'}y)" if side else "identity")
-        + " at the ego origin; the release ships no extrinsics the importer could read"
-    )
-    if model is None:
-        scene.assumptions.append(
-            f"radar {name!r}: no RangeDopplerImageModel, so calibration numbers are placeholders format v1 requires: "
-            f"{PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz and {PAPER_RANGE_BIN_M} m range bins (paper), "
-            f"{PLACEHOLDER_DOPPLER_BIN_MPS} m/s Doppler bins and one antenna at the origin (unknown)"
-        )
-        range_bin = PAPER_RANGE_BIN_M
-        return {
-            "rotation_wxyz": rotation,
-            "translation_m": [0.0, 0.0, 0.0],
-            "center_frequency_hz": PAPER_CENTER_FREQUENCY_HZ,
-            "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * range_bin),
-            "range_bin_m": range_bin,
-            "doppler_bin_mps": PLACEHOLDER_DOPPLER_BIN_MPS,
-            "rx_positions_m": [[0.0, 0.0, 0.0]],
-        }
-    # The release's radar frame is x left, y up, z forward; format v1's is x forward, y left, z up.
-    rx = model.rx_positions_m[:, [2, 0, 1]] if model.rx_positions_m.size else np.zeros((model.num_rx, 3))
-    if assumed_model:
-        scene.assumptions.append(
-            f"radar {name!r}: no RangeDopplerImageModel; its frames are 8 x 512 x 256 x 4 bytes, so the paper's "
-            f"cube layout is assumed: 512 range bins of {PAPER_RANGE_BIN_M} m, 256 Doppler bins centred on zero, "
-            f"4 receivers at {PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz; the Doppler bin ({PLACEHOLDER_DOPPLER_BIN_MPS} m/s) "
-            f"and the receiver positions (half-wavelength line) are placeholders"
-        )
-    else:
-        scene.assumptions.append(
-            f"radar {name!r}: receiver positions taken in the release's radar frame (x left, y up, z forward) and "
-            f"reordered to format v1's (x boresight, y left, z up); bandwidth = c / (2 * range bin)"
-        )
-    return {
-        "rotation_wxyz": rotation,
-        "translation_m": [0.0, 0.0, 0.0],
-        "center_frequency_hz": SPEED_OF_LIGHT_MPS / model.wavelength_m,
-        "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * model.range_axis[1]),
-        "range_bin_m": model.range_axis[1],
-        "doppler_bin_mps": abs(model.doppler_axis[1]),
-        "rx_positions_m": rx.tolist(),
-    }
-
-
-def _doppler_shift(model: rec.RangeDopplerModel) -> tuple[str | None, str]:
-    """How to bring the Doppler axis to format v1's (zero velocity at bin D/2): ``"none"``, ``"fftshift"`` or None."""
-    start, delta, count = model.doppler_axis
-    r_start, r_delta, _ = model.range_axis
-    if not (r_delta > 0 and abs(r_start) <= 1e-6 * r_delta):
-        return None, f"range axis starts at {r_start} m with {r_delta} m bins; format v1 needs bin 0 at 0 m"
-    if not delta > 0:
-        return None, f"Doppler axis step {delta} is not positive"
-    if abs(start + (count // 2) * delta) <= 1e-6 * delta:
-        return "none", "Doppler axis centred (zero velocity at bin D/2), as format v1"
-    if abs(start) <= 1e-6 * delta:
-        return "fftshift", "Doppler axis starts at 0 m/s: taken as FFT order and fftshifted to put zero at bin D/2"
-    return None, f"Doppler axis starts at {start} m/s with {delta} m/s bins, neither centred nor FFT order"
 
 
 class _SceneImport:
@@ -332,7 +194,7 @@ class _SceneImport:
         images = self._keyed(self._by_kind("Image"), "_images")
         points = self._keyed(self._by_kind("TrackerState"), "_points")
         rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
-        sides = _infer_sides(images, scene)
+        sides = assume.infer_sides({serial: _sar_frames(opened) for serial, opened in images.items()}, scene.assumptions)
 
         def rename(serial: str) -> str:
             return sides.get(serial, serial)
@@ -341,20 +203,22 @@ class _SceneImport:
         assumed_models = set()
         for name, opened in rd_frames.items():
             first = next((record for _, record in _decoded(opened, probe=True)), None)
-            if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(PAPER_CUBE_SHAPE)):
-                models[name] = _paper_model()
+            if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(assume.PAPER_CUBE_SHAPE)):
+                models[name] = assume.paper_model()
                 assumed_models.add(name)
         radars = sorted({rename(s) for s in images} | {rename(s) for s in points} | set(rd_frames))
-        calibration = {"imu": {"rotation_wxyz": list(EGO_Q_IMU_WXYZ), "translation_m": [0.0, 0.0, 0.0]}}
-        scene.assumptions.append("IMU at the ego origin, axes forward-right-down (ego_T_imu: 180 degrees about x)")
+        calibration = {"imu": assume.imu_entry(scene.assumptions)}
         for radar in radars:
-            calibration[radar] = _radar_entry(radar, models.get(radar), scene, radar in assumed_models)
+            calibration[radar] = assume.radar_entry(radar, models.get(radar), scene.assumptions, radar in assumed_models)
         lidars = self._keyed(self._by_kind("LidarPointsFrame"), "")
         cameras = self._keyed(self._by_kind("CameraIndexRecord"), "")
         for name in list(lidars) + list(cameras):
-            calibration[name] = {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
-            scene.assumptions.append(f"sensor {name!r} pose in the ego frame: identity (no extrinsics in the release)")
-        enu_origin = _enu_origin(tracklog, images, scene)
+            calibration[name] = assume.sensor_entry(name, scene.assumptions)
+        enu_origin = assume.enu_origin(
+            None if tracklog is None else tracklog[1][0],
+            itertools.chain.from_iterable(_sar_frames(opened) for opened in images.values()),
+            scene.assumptions,
+        )
         enu = LocalENU(**enu_origin)
         with writer.scene(self.source.scene_id, enu_origin=enu_origin, calibration={"sensors": calibration}) as out:
             if tracklog is not None:
@@ -411,9 +275,7 @@ class _SceneImport:
             elif len(models) == 1:
                 out[name] = models[0][1]
                 models[0][0].summary.written_to = "calibration"
-                self.summary.assumptions.append(
-                    f"range-Doppler model {models[0][0].summary.path} applies to {name!r} (the only model in the scene)"
-                )
+                self.summary.assumptions.append(assume.shared_model(models[0][0].summary.path, name))
         return out
 
     def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
@@ -445,14 +307,7 @@ class _SceneImport:
             i_fastest, evidence = vote_pixel_order(frames, probes)
             if i_fastest is not None:
                 break
-        if i_fastest is None:
-            self.summary.assumptions.append(
-                f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; not verifiable here: {evidence})"
-            )
-            return True
-        order = "j*rows + i (the SDK viewer's reading)" if i_fastest else "i*cols + j (row-major, NOT the SDK viewer's reading)"
-        self.summary.assumptions.append(f"sar/{name}: pixel (i, j) is flat element {order}: checked, {evidence}")
-        return i_fastest
+        return assume.pixel_order(name, i_fastest, evidence, self.summary.assumptions)
 
     def _write_sar(self, out, name: str, serial: str, opened: _Opened, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
@@ -487,17 +342,13 @@ class _SceneImport:
         opened.summary.written_to = f"sar/{name}"
         magnitude_only = holds_seen == {"magnitude"}
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
-        self.summary.assumptions += [
-            f"sar/{name}: "
-            + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
-            f"sar/{name}: aperture start/end are not in the release; aperture_ns = [t, t]",
-        ]
+        self.summary.assumptions += assume.sar_pixels_and_aperture(name, magnitude_only)
 
     def _write_cubes(self, out, name: str, opened: _Opened, model: rec.RangeDopplerModel | None) -> None:
         if model is None:
             opened.summary.skipped.append("no RangeDopplerImageModel found for it: the cube shape is unknown")
             return
-        shift, why = _doppler_shift(model)
+        shift, why = assume.doppler_shift(model)
         if shift is None:
             opened.summary.skipped.append(why)
             return
@@ -518,7 +369,7 @@ class _SceneImport:
         if bad:
             opened.summary.skipped.append(f"{bad} frames whose size is not 8 x {shape} bytes")
         opened.summary.written_to = f"radar/{name}"
-        self.summary.assumptions += [f"radar/{name}: {why}", f"radar/{name}: range velocity sign as recorded (unknown convention)"]
+        self.summary.assumptions += assume.cube_axes(name, why)
 
     def _write_detections(self, out, name: str, opened: _Opened) -> None:
         stamps = _Stamps(opened.summary)
@@ -544,12 +395,11 @@ class _SceneImport:
         opened.summary.written_to = f"detections/{name}"
         if nan:
             opened.summary.notes.append(f"{nan} detections with NaN ECEF position kept as NaN")
-        meaning = "amplitude / confidence" if opened.stream.kind.generation == "2020" else "magnitude / doa_snr"
-        self.summary.assumptions.append(f"detections/{name}: magnitude and snr are the release's {meaning} (fields 3, 10)")
+        self.summary.assumptions.append(assume.detection_fields(name, opened.stream.kind.generation))
 
     def _write_lidar(self, out, name: str, opened: _Opened, enu: LocalENU) -> None:
         stamps = _Stamps(opened.summary)
-        ecef_parts, dropped, frame_note = [], 0, None
+        ecef_parts, dropped, points_in_enu = [], 0, False
         for offset, buf, start, end in _iter(opened):
             try:
                 sweep = rec.lidar_sweep(opened.stream.kind, buf, start, end)
@@ -559,7 +409,7 @@ class _SceneImport:
             local = sweep.position_local
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
-                frame_note = "enu"
+                points_in_enu = True
             keep = np.all(np.isfinite(local), axis=1) & np.all(np.isfinite(sweep.position_ecef), axis=1)
             dropped += int(np.count_nonzero(~keep))
             ns = stamps.take(sweep.timestamp_s)
@@ -575,15 +425,9 @@ class _SceneImport:
         opened.summary.written_to = f"lidar/{name}"
         if dropped:
             opened.summary.skipped.append(f"{dropped} points with NaN positions")
-        if frame_note:
+        if points_in_enu:
             out.write_attrs(f"lidar/{name}", {"points_frame": "enu"})
-            self.summary.assumptions.append(
-                f"lidar/{name}: the release gives no local positions (or ECEF ones), so points are in the scene's ENU frame"
-            )
-        else:
-            self.summary.assumptions.append(
-                f"lidar/{name}: LidarPoint.position_local taken as the lidar frame (unknown in the release)"
-            )
+        self.summary.assumptions.append(assume.lidar_frame(name, points_in_enu))
 
     def _write_camera_index(self, out, name: str, opened: _Opened) -> None:
         stamps = _Stamps(opened.summary)
@@ -597,7 +441,7 @@ class _SceneImport:
         if times:
             out.write_camera_index(name, times, index)
             opened.summary.written_to = f"camera_index/{name}"
-            self.summary.assumptions.append(f"camera_index/{name}: the video itself is not converted (container unknown)")
+            self.summary.assumptions.append(assume.camera_video(name))
 
     def close(self) -> None:
         for opened in self.opened:
