@@ -15,8 +15,7 @@ import json
 import os
 import pathlib
 import re
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -27,25 +26,11 @@ from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
+from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
 from zendar_dataset.release.discover import SceneSource, find_scenes
-from zendar_dataset.release.messages import RD_MODEL
 from zendar_dataset.release.pixel_order import vote_pixel_order
-from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
-from zendar_dataset.release.summary import (
-    SUMMARY_JSON,
-    ImportSummary,
-    SceneSummary,
-    StreamSummary,
-)
-from zendar_dataset.release.wire import WireError, decode
-
-
-@dataclass
-class _Opened:
-    path: pathlib.Path
-    stream: ReleaseStream | None
-    summary: StreamSummary
-    model: rec.RangeDopplerModel | None = None  # for single-message .pb model files
+from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
+from zendar_dataset.release.wire import WireError
 
 
 def _prefix(path: pathlib.Path, suffix: str) -> str | None:
@@ -53,63 +38,9 @@ def _prefix(path: pathlib.Path, suffix: str) -> str | None:
     return name[: -len(suffix)] if name.endswith(suffix) and len(name) > len(suffix) else None
 
 
-def _open(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> _Opened:
-    summary = StreamSummary(str(path.relative_to(src)) if path != src else path.name)
-    if path.name.lower().endswith(".pb"):
-        data = memoryview(path.read_bytes())
-        try:
-            model = rec.rd_model(decode(RD_MODEL, data))
-        except (WireError, KeyError) as exc:
-            summary.skipped.append(f"single-message file that is not a RangeDopplerImageModel ({exc})")
-            return _Opened(path, None, summary)
-        summary.kind, summary.framing, summary.records = "RangeDopplerImageModel (2020)", "one message, no prefix", 1
-        return _Opened(path, None, summary, model)
-    try:
-        stream = ReleaseStream(path, skip_corrupt=skip_corrupt)
-    except UnknownMessageError as exc:
-        # Sound framing, unknown content (a message the release's schemas do not define): not the user's error.
-        summary.skipped.append(f"no known message decodes it: {exc}")
-        return _Opened(path, None, summary)
-    except ZendarFormatError as exc:
-        problems.extend(exc.problems)
-        return _Opened(path, None, summary)
-    summary.kind, summary.framing, summary.notes = stream.kind.label, stream.framing.describe(), list(stream.notes)
-    if not stream.kind.converted:
-        summary.skipped.append(f"{stream.kind.label}: raw acquisition packets are not converted (no decoded product)")
-    return _Opened(path, stream, summary)
-
-
-def _finish(opened: _Opened) -> None:
-    if opened.stream is not None:
-        opened.summary.empty_records = opened.stream.empty_records
-        opened.summary.lost_bytes = sum(loss.size_bytes for loss in opened.stream.losses)
-        opened.summary.skipped.extend(
-            f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses
-        )
-
-
-def _iter(opened: _Opened, probe: bool = False):
-    """Raw records ``(offset, buf, start, end)`` of a stream, counted in its summary unless ``probe``
-    (a look-ahead pass: the writing pass counts and reports)."""
-    for item in opened.stream.records():
-        opened.summary.records += not probe
-        yield item
-
-
-def _decoded(opened: _Opened, probe: bool = False):
-    """Decoded records ``(offset, dict)``; one that does not decode is skipped (``skip_corrupt``) or raises,
-    except in a ``probe`` pass, which leaves it to the writing pass."""
-    for offset, buf, start, end in _iter(opened, probe):
-        try:
-            yield offset, decode(opened.stream.kind.message, buf, start, end)
-        except WireError as exc:
-            if not probe:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
-
-
-def _sar_frames(opened: _Opened):
-    """The SAR frames of an ``Image`` stream, in a probe pass (the writing pass counts and reports)."""
-    for _, record in _decoded(opened, probe=True):
+def _sar_frames(opened: OpenedStream, probe: bool = False) -> Iterator[rec.SarFrame]:
+    """The SAR frames of an ``Image`` stream (:func:`decoded_records`)."""
+    for record in decoded_records(opened, probe=probe):
         yield rec.sar_frame(opened.stream.kind, record)
 
 
@@ -137,7 +68,7 @@ class _Stamps:
         self.summary.skipped.extend(f"{n} records: {why}" for why, n in self.dropped.items())
 
 
-def _tracklog(opened: list[_Opened], scene: SceneSummary):
+def _tracklog(opened: list[OpenedStream], scene: SceneSummary):
     if not opened:
         return None
     first, *rest = opened
@@ -150,7 +81,7 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
         first.summary.records += offsets.shape[0]
     except WireError:
         # Some record does not decode: go record by record, so each is reported (or skipped) where it is.
-        decoded = [rec.pose(record) for _, record in _decoded(first)]
+        decoded = [rec.pose(record) for record in decoded_records(first)]
         seconds = np.array([d.timestamp_s for d in decoded])
         position = np.array([d.position_ecef for d in decoded]).reshape(-1, 3)
         attitude = np.array([d.attitude_wxyz for d in decoded]).reshape(-1, 4)
@@ -182,10 +113,10 @@ class _SceneImport:
     def __init__(self, source: SceneSource, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> None:
         self.source = source
         self.summary = SceneSummary(source.scene_id, str(source.folder))
-        self.opened = [_open(path, src, skip_corrupt, problems) for path in source.files]
+        self.opened = [open_stream(path, src, skip_corrupt, problems) for path in source.files]
         self.summary.streams = [o.summary for o in self.opened]
 
-    def _by_kind(self, name: str) -> list[_Opened]:
+    def _by_kind(self, name: str) -> list[OpenedStream]:
         return [o for o in self.opened if o.stream is not None and o.stream.kind.name == name and o.stream.kind.converted]
 
     def run(self, writer: DatasetWriter) -> None:
@@ -194,7 +125,7 @@ class _SceneImport:
         images = self._keyed(self._by_kind("Image"), "_images")
         points = self._keyed(self._by_kind("TrackerState"), "_points")
         rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
-        sides = assume.infer_sides({serial: _sar_frames(opened) for serial, opened in images.items()}, scene.assumptions)
+        sides = assume.infer_sides({serial: _sar_frames(o, probe=True) for serial, o in images.items()}, scene.assumptions)
 
         def rename(serial: str) -> str:
             return sides.get(serial, serial)
@@ -202,7 +133,7 @@ class _SceneImport:
         models = self._models(list(rd_frames))
         assumed_models = set()
         for name, opened in rd_frames.items():
-            first = next((record for _, record in _decoded(opened, probe=True)), None)
+            first = next(decoded_records(opened, probe=True), None)
             if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(assume.PAPER_CUBE_SHAPE)):
                 models[name] = assume.paper_model()
                 assumed_models.add(name)
@@ -216,7 +147,7 @@ class _SceneImport:
             calibration[name] = assume.sensor_entry(name, scene.assumptions)
         enu_origin = assume.enu_origin(
             None if tracklog is None else tracklog[1][0],
-            itertools.chain.from_iterable(_sar_frames(opened) for opened in images.values()),
+            itertools.chain.from_iterable(_sar_frames(opened, probe=True) for opened in images.values()),
             scene.assumptions,
         )
         enu = LocalENU(**enu_origin)
@@ -235,12 +166,12 @@ class _SceneImport:
             for name, opened in cameras.items():
                 self._write_camera_index(out, name, opened)
             for opened in self.opened:
-                _finish(opened)
+                finish_summary(opened)
             out.write_attrs("", {"release_import": {"source": str(self.source.folder), "assumptions": scene.assumptions}})
 
-    def _keyed(self, opened: list[_Opened], suffix: str) -> dict[str, _Opened]:
+    def _keyed(self, opened: list[OpenedStream], suffix: str) -> dict[str, OpenedStream]:
         """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name."""
-        out: dict[str, _Opened] = {}
+        out: dict[str, OpenedStream] = {}
         for item in opened:
             name = _prefix(item.path, suffix) if suffix else None
             if name is None:
@@ -261,9 +192,9 @@ class _SceneImport:
             if item.model is not None:
                 models.append((item, item.model))
             elif item.stream is not None and item.stream.kind.name == "RangeDopplerImageModel":
-                for _, record in _decoded(item):
+                record = next(decoded_records(item), None)
+                if record is not None:
                     models.append((item, rec.rd_model(record)))
-                    break
                 if len(item.stream) > 1:
                     item.summary.skipped.append(f"{len(item.stream) - 1} further model records ignored (the first is used)")
         out = {}
@@ -278,11 +209,11 @@ class _SceneImport:
                 self.summary.assumptions.append(assume.shared_model(models[0][0].summary.path, name))
         return out
 
-    def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
+    def _pixel_order(self, name: str, opened: OpenedStream, points: OpenedStream | None, lidars: list[OpenedStream]) -> bool:
         """Check the pixel order against this radar's detections, then the lidar if still undecided (``pixel_order.py``)."""
         frames = []
-        for _, record in _decoded(opened, probe=True):
-            frames.append(rec.sar_frame(opened.stream.kind, record))
+        for frame in _sar_frames(opened, probe=True):
+            frames.append(frame)
             if len(frames) >= 20:
                 break
         if not frames:
@@ -291,16 +222,11 @@ class _SceneImport:
         probes: list[tuple[float, np.ndarray]] = []
         i_fastest, evidence = None, "no detections or lidar points to check against"
         for source in ([points] if points else []) + lidars:
-            for offset, buf, start, end in _iter(source, probe=True):
-                try:
-                    if source.stream.kind.name == "TrackerState":
-                        found = rec.detections(source.stream.kind, buf, start, end)
-                        probe = (found.timestamp_s, found.columns["position_ecef"])
-                    else:
-                        sweep = rec.lidar_sweep(source.stream.kind, buf, start, end)
-                        probe = (sweep.timestamp_s, sweep.position_ecef)
-                except WireError:
-                    continue  # reported when the stream itself is imported
+            if source.stream.kind.name == "TrackerState":
+                known = ((d.timestamp_s, d.columns["position_ecef"]) for d in decoded_records(source, rec.detections, probe=True))
+            else:
+                known = ((s.timestamp_s, s.position_ecef) for s in decoded_records(source, rec.lidar_sweep, probe=True))
+            for probe in known:
                 if probe[0] > last_s:
                     break
                 probes.append(probe)
@@ -309,13 +235,12 @@ class _SceneImport:
                 break
         return assume.pixel_order(name, i_fastest, evidence, self.summary.assumptions)
 
-    def _write_sar(self, out, name: str, serial: str, opened: _Opened, i_fastest: bool) -> None:
+    def _write_sar(self, out, name: str, serial: str, opened: OpenedStream, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
         holds_seen = set()
         bad: dict[str, int] = {}
         shape = None
-        for _, record in _decoded(opened):
-            frame = rec.sar_frame(opened.stream.kind, record)
+        for frame in _sar_frames(opened):
             try:
                 image, holds = rec.sar_pixels(frame, i_fastest)
             except ValueError as exc:
@@ -344,7 +269,7 @@ class _SceneImport:
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
         self.summary.assumptions += assume.sar_pixels_and_aperture(name, magnitude_only)
 
-    def _write_cubes(self, out, name: str, opened: _Opened, model: rec.RangeDopplerModel | None) -> None:
+    def _write_cubes(self, out, name: str, opened: OpenedStream, model: rec.RangeDopplerModel | None) -> None:
         if model is None:
             opened.summary.skipped.append("no RangeDopplerImageModel found for it: the cube shape is unknown")
             return
@@ -355,7 +280,7 @@ class _SceneImport:
         shape = (model.range_axis[2], model.doppler_axis[2], model.num_rx)
         stamps = _Stamps(opened.summary)
         bad = 0
-        for _, record in _decoded(opened):
+        for record in decoded_records(opened):
             data = record["data"]
             if len(data) != 8 * int(np.prod(shape)):
                 bad += 1
@@ -371,15 +296,10 @@ class _SceneImport:
         opened.summary.written_to = f"radar/{name}"
         self.summary.assumptions += assume.cube_axes(name, why)
 
-    def _write_detections(self, out, name: str, opened: _Opened) -> None:
+    def _write_detections(self, out, name: str, opened: OpenedStream) -> None:
         stamps = _Stamps(opened.summary)
         times, offsets, parts = [], [0], []
-        for offset, buf, start, end in _iter(opened):
-            try:
-                found = rec.detections(opened.stream.kind, buf, start, end)
-            except WireError as exc:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
-                continue
+        for found in decoded_records(opened, rec.detections):
             ns = stamps.take(found.timestamp_s)
             if ns is None:
                 continue
@@ -397,15 +317,10 @@ class _SceneImport:
             opened.summary.notes.append(f"{nan} detections with NaN ECEF position kept as NaN")
         self.summary.assumptions.append(assume.detection_fields(name, opened.stream.kind.generation))
 
-    def _write_lidar(self, out, name: str, opened: _Opened, enu: LocalENU) -> None:
+    def _write_lidar(self, out, name: str, opened: OpenedStream, enu: LocalENU) -> None:
         stamps = _Stamps(opened.summary)
         ecef_parts, dropped, points_in_enu = [], 0, False
-        for offset, buf, start, end in _iter(opened):
-            try:
-                sweep = rec.lidar_sweep(opened.stream.kind, buf, start, end)
-            except WireError as exc:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
-                continue
+        for sweep in decoded_records(opened, rec.lidar_sweep):
             local = sweep.position_local
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
@@ -429,10 +344,10 @@ class _SceneImport:
             out.write_attrs(f"lidar/{name}", {"points_frame": "enu"})
         self.summary.assumptions.append(assume.lidar_frame(name, points_in_enu))
 
-    def _write_camera_index(self, out, name: str, opened: _Opened) -> None:
+    def _write_camera_index(self, out, name: str, opened: OpenedStream) -> None:
         stamps = _Stamps(opened.summary)
         times, index = [], []
-        for _, record in _decoded(opened):
+        for record in decoded_records(opened):
             ns = stamps.take(record["timestamp"]["common"])
             if ns is not None:
                 times.append(ns)
