@@ -4,8 +4,10 @@ Each scene of the release (``release/discover.py``) becomes one scene store
 written through :class:`zendar_dataset.format.writer.DatasetWriter`: atomic
 (a scene appears only when complete), resumable (complete scenes are kept and
 skipped), and the source is only read.  Everything the release does not say
-and the importer had to decide is recorded as an assumption: in the summary,
-and in the scene's root attribute ``release_import``.
+and the importer had to decide (``release/assumptions.py``) is recorded as an
+assumption: in the summary (``release/summary.py``), and in the scene's root
+attribute ``release_import``.  Every stream is read through one loop
+(``release/decoded.py``); the writers here turn its records into format-v1 arrays.
 """
 
 from __future__ import annotations
