@@ -4,113 +4,35 @@ Each scene of the release (``release/discover.py``) becomes one scene store
 written through :class:`zendar_dataset.format.writer.DatasetWriter`: atomic
 (a scene appears only when complete), resumable (complete scenes are kept and
 skipped), and the source is only read.  Everything the release does not say
-and the importer had to decide is recorded as an assumption: in the summary,
-and in the scene's root attribute ``release_import``.
+and the importer had to decide (``release/assumptions.py``) is recorded as an
+assumption: in the summary (``release/summary.py``), and in the scene's root
+attribute ``release_import``.  Every stream is read through one loop
+(``release/decoded.py``); the writers here turn its records into format-v1 arrays.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import pathlib
 import re
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format.schema import DATASET_JSON, SPLITS
-from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.format.writer import DatasetWriter
-from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
 from zendar_dataset.geometry.geodesy import LocalENU
+from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
+from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
 from zendar_dataset.release.discover import SceneSource, find_scenes
-from zendar_dataset.release.messages import RD_MODEL
 from zendar_dataset.release.pixel_order import vote_pixel_order
-from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
-from zendar_dataset.release.wire import WireError, decode
-
-SPEED_OF_LIGHT_MPS = 299_792_458.0
-SUMMARY_JSON = "release_import.json"
-# Radar numbers used only when a radar has no RangeDopplerImageModel (format v1 requires them).
-PAPER_CENTER_FREQUENCY_HZ = 77e9
-PAPER_RANGE_BIN_M = 0.176
-PLACEHOLDER_DOPPLER_BIN_MPS = 0.1
-# IMU frame (forward, right, down) -> ego frame (forward, left, up): 180 degrees about x.
-EGO_Q_IMU_WXYZ = (0.0, 1.0, 0.0, 0.0)
-# A radar looking to the ego's left (+y) or right (-y): its boresight x turned by +-90 degrees about z.
-SIDE_Q_WXYZ = {"left": (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)), "right": (np.sqrt(0.5), 0.0, 0.0, -np.sqrt(0.5))}
-_SIDE_WORD = re.compile(r"(?:^|[_\W])(left|right)(?:$|[_\W])", re.IGNORECASE)
-
-
-@dataclass
-class StreamSummary:
-    """What happened to one stream file."""
-
-    path: str
-    kind: str | None = None
-    framing: str | None = None
-    records: int = 0
-    empty_records: int = 0
-    written_to: str | None = None
-    skipped: list[str] = field(default_factory=list)
-    lost_bytes: int = 0
-    notes: list[str] = field(default_factory=list)
-
-
-@dataclass
-class SceneSummary:
-    """One scene: where it went, its streams and the assumptions made."""
-
-    scene_id: str
-    source: str
-    status: str = "imported"  # or "already imported"
-    streams: list[StreamSummary] = field(default_factory=list)
-    assumptions: list[str] = field(default_factory=list)
-
-
-@dataclass
-class ImportSummary:
-    """The whole import, printable with :meth:`lines` and saved as ``release_import.json``."""
-
-    source: str
-    out: str
-    scenes: list[SceneSummary] = field(default_factory=list)
-
-    def lines(self) -> list[str]:
-        out = []
-        n_streams = sum(len(s.streams) for s in self.scenes)
-        n_records = sum(st.records for s in self.scenes for st in s.streams)
-        out.append(f"{self.source}: {len(self.scenes)} scenes, {n_streams} streams, {n_records} records read -> {self.out}")
-        for scene in self.scenes:
-            out.append(f"scene {scene.scene_id} ({scene.status}) from {scene.source}")
-            for st in scene.streams:
-                target = f" -> {st.written_to}" if st.written_to else ""
-                out.append(f"  {st.path}: {st.kind or '?'}, {st.records} records{target}; framing {st.framing}")
-                for note in st.notes:
-                    out.append(f"    kind: {note}")
-                if st.empty_records:
-                    out.append(f"    {st.empty_records} empty records (length 0) skipped")
-                if st.lost_bytes:
-                    out.append(f"    lost {st.lost_bytes} bytes to --skip-corrupt")
-                for reason in st.skipped:
-                    out.append(f"    skipped: {reason}")
-            for assumption in scene.assumptions:
-                out.append(f"  assumed: {assumption}")
-        return out
-
-    def to_json(self) -> dict:
-        return asdict(self)
-
-
-@dataclass
-class _Opened:
-    path: pathlib.Path
-    stream: ReleaseStream | None
-    summary: StreamSummary
-    model: rec.RangeDopplerModel | None = None  # for single-message .pb model files
+from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
+from zendar_dataset.release.wire import WireError
 
 
 def _prefix(path: pathlib.Path, suffix: str) -> str | None:
@@ -118,58 +40,10 @@ def _prefix(path: pathlib.Path, suffix: str) -> str | None:
     return name[: -len(suffix)] if name.endswith(suffix) and len(name) > len(suffix) else None
 
 
-def _open(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> _Opened:
-    summary = StreamSummary(str(path.relative_to(src)) if path != src else path.name)
-    if path.name.lower().endswith(".pb"):
-        data = memoryview(path.read_bytes())
-        try:
-            model = rec.rd_model(decode(RD_MODEL, data))
-        except (WireError, KeyError) as exc:
-            summary.skipped.append(f"single-message file that is not a RangeDopplerImageModel ({exc})")
-            return _Opened(path, None, summary)
-        summary.kind, summary.framing, summary.records = "RangeDopplerImageModel (2020)", "one message, no prefix", 1
-        return _Opened(path, None, summary, model)
-    try:
-        stream = ReleaseStream(path, skip_corrupt=skip_corrupt)
-    except UnknownMessageError as exc:
-        # Sound framing, unknown content (a message the release's schemas do not define): not the user's error.
-        summary.skipped.append(f"no known message decodes it: {exc}")
-        return _Opened(path, None, summary)
-    except ZendarFormatError as exc:
-        problems.extend(exc.problems)
-        return _Opened(path, None, summary)
-    summary.kind, summary.framing, summary.notes = stream.kind.label, stream.framing.describe(), list(stream.notes)
-    if not stream.kind.converted:
-        summary.skipped.append(f"{stream.kind.label}: raw acquisition packets are not converted (no decoded product)")
-    return _Opened(path, stream, summary)
-
-
-def _finish(opened: _Opened) -> None:
-    if opened.stream is not None:
-        opened.summary.empty_records = opened.stream.empty_records
-        opened.summary.lost_bytes = sum(loss.size_bytes for loss in opened.stream.losses)
-        opened.summary.skipped.extend(
-            f"{loss.size_bytes} bytes at offset {loss.offset}: {loss.reason}" for loss in opened.stream.losses
-        )
-
-
-def _iter(opened: _Opened, probe: bool = False):
-    """Raw records ``(offset, buf, start, end)`` of a stream, counted in its summary unless ``probe``
-    (a look-ahead pass: the writing pass counts and reports)."""
-    for item in opened.stream.records():
-        opened.summary.records += not probe
-        yield item
-
-
-def _decoded(opened: _Opened, probe: bool = False):
-    """Decoded records ``(offset, dict)``; one that does not decode is skipped (``skip_corrupt``) or raises,
-    except in a ``probe`` pass, which leaves it to the writing pass."""
-    for offset, buf, start, end in _iter(opened, probe):
-        try:
-            yield offset, decode(opened.stream.kind.message, buf, start, end)
-        except WireError as exc:
-            if not probe:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
+def _sar_frames(opened: OpenedStream, probe: bool = False) -> Iterator[rec.SarFrame]:
+    """The SAR frames of an ``Image`` stream (:func:`decoded_records`)."""
+    for record in decoded_records(opened, probe=probe):
+        yield rec.sar_frame(opened.stream.kind, record)
 
 
 class _Stamps:
@@ -196,7 +70,7 @@ class _Stamps:
         self.summary.skipped.extend(f"{n} records: {why}" for why, n in self.dropped.items())
 
 
-def _tracklog(opened: list[_Opened], scene: SceneSummary):
+def _tracklog(opened: list[OpenedStream], scene: SceneSummary):
     if not opened:
         return None
     first, *rest = opened
@@ -209,7 +83,7 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
         first.summary.records += offsets.shape[0]
     except WireError:
         # Some record does not decode: go record by record, so each is reported (or skipped) where it is.
-        decoded = [rec.pose(record) for _, record in _decoded(first)]
+        decoded = [rec.pose(record) for record in decoded_records(first)]
         seconds = np.array([d.timestamp_s for d in decoded])
         position = np.array([d.position_ecef for d in decoded]).reshape(-1, 3)
         attitude = np.array([d.attitude_wxyz for d in decoded]).reshape(-1, 4)
@@ -231,147 +105,8 @@ def _tracklog(opened: list[_Opened], scene: SceneSummary):
         first.summary.skipped.append("no usable pose")
         return None
     first.summary.written_to = "tracklog"
-    scene.assumptions.append("Position.attitude rotates IMU (forward, right, down) vectors into ECEF; quaternions normalised")
+    scene.assumptions.append(assume.TRACKLOG_ATTITUDE)
     return np.asarray(t, np.int64), p, q
-
-
-def _infer_sides(images: dict[str, _Opened], scene: SceneSummary) -> dict[str, str]:
-    """Serial -> "left"/"right" from where each radar's images lie relative to the vehicle.
-
-    The image centre, moved into the vehicle (IMU: forward, right, down) frame with the
-    image's own pose, has y > 0 on the right.  Named sides are used only when exactly one
-    serial falls on each side.
-    """
-    sides: dict[str, str] = {}
-    evidence = {}
-    for serial, opened in images.items():
-        right = []
-        for _, record in _decoded(opened, probe=True):
-            frame = rec.sar_frame(opened.stream.kind, record)
-            centre = frame.origin_ecef + frame.rows / 2 * frame.di_ecef + frame.cols / 2 * frame.dj_ecef
-            q = frame.attitude_wxyz
-            if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(q)) and np.all(np.isfinite(frame.position_ecef))):
-                continue
-            offset_imu = quat_wxyz_to_matrix(q / np.linalg.norm(q)).T @ (centre - frame.position_ecef)
-            right.append(offset_imu[1])
-            if len(right) >= 20:
-                break
-        if right:
-            lateral = float(np.median(right))
-            sides[serial] = "right" if lateral > 0 else "left"
-            evidence[serial] = lateral
-    named = sorted(sides.values())
-    if len(sides) != len(images) or len(set(named)) != len(named):
-        scene.assumptions.append(
-            f"serial -> side: not inferable (lateral image offsets {evidence}); radars keep their serials as names"
-        )
-        return {}
-    for serial, side in sorted(sides.items()):
-        scene.assumptions.append(
-            f"serial {serial} -> {side!r}: inferred from its SAR images lying {abs(evidence[serial]):.1f} m to the "
-            f"{side} of the vehicle (median over the first frames); not stated by the release"
-        )
-    return sides
-
-
-def _enu_origin(tracklog, images: dict[str, _Opened], scene: SceneSummary) -> dict:
-    anchor = None
-    if tracklog is not None:
-        anchor, what = tracklog[1][0], "the first tracklog position"
-    else:
-        for opened in images.values():
-            for _, record in _decoded(opened, probe=True):
-                frame = rec.sar_frame(opened.stream.kind, record)
-                if np.all(np.isfinite(frame.origin_ecef)):
-                    anchor, what = frame.origin_ecef, "the first SAR image origin"
-                    break
-            if anchor is not None:
-                break
-    if anchor is None:
-        scene.assumptions.append("enu_origin: nothing geolocated in the scene; (0, 0, 0) used")
-        return {"lat_deg": 0.0, "lon_deg": 0.0, "height_m": 0.0}
-    lat, lon, height = (float(np.asarray(v).reshape(-1)[0]) for v in ecef_to_geodetic(np.asarray(anchor).reshape(1, 3)))
-    scene.assumptions.append(f"enu_origin: {what}")
-    return {"lat_deg": lat, "lon_deg": lon, "height_m": height}
-
-
-PAPER_CUBE_SHAPE = (512, 256, 4)  # paper §3.1: range bins, Doppler bins, receive channels
-
-
-def _paper_model() -> rec.RangeDopplerModel:
-    """The paper's cube layout for frames that come without a model: 512 × 0.176 m range bins, 256 Doppler
-    bins centred on zero (bin size a placeholder) and 4 receivers half a wavelength apart along the
-    release radar frame's x (left) axis (placeholder positions)."""
-    r, d, a = PAPER_CUBE_SHAPE
-    wavelength = SPEED_OF_LIGHT_MPS / PAPER_CENTER_FREQUENCY_HZ
-    rx = np.column_stack([np.arange(a) * wavelength / 2, np.zeros(a), np.zeros(a)])
-    return rec.RangeDopplerModel(
-        a, (0.0, PAPER_RANGE_BIN_M, r), (-(d // 2) * PLACEHOLDER_DOPPLER_BIN_MPS, PLACEHOLDER_DOPPLER_BIN_MPS, d), rx, wavelength
-    )
-
-
-def _radar_entry(name: str, model: rec.RangeDopplerModel | None, scene: SceneSummary, assumed_model: bool = False) -> dict:
-    side = name if name in SIDE_Q_WXYZ else None
-    rotation = list(SIDE_Q_WXYZ[side]) if side else [1.0, 0.0, 0.0, 0.0]
-    scene.assumptions.append(
-        f"radar {name!r} pose in the ego frame: "
-        + (f"looking to the {side} (boresight along ego {'+' if side == 'left' else '-'}y)" if side else "identity")
-        + " at the ego origin; the release ships no extrinsics the importer could read"
-    )
-    if model is None:
-        scene.assumptions.append(
-            f"radar {name!r}: no RangeDopplerImageModel, so calibration numbers are placeholders format v1 requires: "
-            f"{PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz and {PAPER_RANGE_BIN_M} m range bins (paper), "
-            f"{PLACEHOLDER_DOPPLER_BIN_MPS} m/s Doppler bins and one antenna at the origin (unknown)"
-        )
-        range_bin = PAPER_RANGE_BIN_M
-        return {
-            "rotation_wxyz": rotation,
-            "translation_m": [0.0, 0.0, 0.0],
-            "center_frequency_hz": PAPER_CENTER_FREQUENCY_HZ,
-            "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * range_bin),
-            "range_bin_m": range_bin,
-            "doppler_bin_mps": PLACEHOLDER_DOPPLER_BIN_MPS,
-            "rx_positions_m": [[0.0, 0.0, 0.0]],
-        }
-    # The release's radar frame is x left, y up, z forward; format v1's is x forward, y left, z up.
-    rx = model.rx_positions_m[:, [2, 0, 1]] if model.rx_positions_m.size else np.zeros((model.num_rx, 3))
-    if assumed_model:
-        scene.assumptions.append(
-            f"radar {name!r}: no RangeDopplerImageModel; its frames are 8 x 512 x 256 x 4 bytes, so the paper's "
-            f"cube layout is assumed: 512 range bins of {PAPER_RANGE_BIN_M} m, 256 Doppler bins centred on zero, "
-            f"4 receivers at {PAPER_CENTER_FREQUENCY_HZ / 1e9:g} GHz; the Doppler bin ({PLACEHOLDER_DOPPLER_BIN_MPS} m/s) "
-            f"and the receiver positions (half-wavelength line) are placeholders"
-        )
-    else:
-        scene.assumptions.append(
-            f"radar {name!r}: receiver positions taken in the release's radar frame (x left, y up, z forward) and "
-            f"reordered to format v1's (x boresight, y left, z up); bandwidth = c / (2 * range bin)"
-        )
-    return {
-        "rotation_wxyz": rotation,
-        "translation_m": [0.0, 0.0, 0.0],
-        "center_frequency_hz": SPEED_OF_LIGHT_MPS / model.wavelength_m,
-        "bandwidth_hz": SPEED_OF_LIGHT_MPS / (2 * model.range_axis[1]),
-        "range_bin_m": model.range_axis[1],
-        "doppler_bin_mps": abs(model.doppler_axis[1]),
-        "rx_positions_m": rx.tolist(),
-    }
-
-
-def _doppler_shift(model: rec.RangeDopplerModel) -> tuple[str | None, str]:
-    """How to bring the Doppler axis to format v1's (zero velocity at bin D/2): ``"none"``, ``"fftshift"`` or None."""
-    start, delta, count = model.doppler_axis
-    r_start, r_delta, _ = model.range_axis
-    if not (r_delta > 0 and abs(r_start) <= 1e-6 * r_delta):
-        return None, f"range axis starts at {r_start} m with {r_delta} m bins; format v1 needs bin 0 at 0 m"
-    if not delta > 0:
-        return None, f"Doppler axis step {delta} is not positive"
-    if abs(start + (count // 2) * delta) <= 1e-6 * delta:
-        return "none", "Doppler axis centred (zero velocity at bin D/2), as format v1"
-    if abs(start) <= 1e-6 * delta:
-        return "fftshift", "Doppler axis starts at 0 m/s: taken as FFT order and fftshifted to put zero at bin D/2"
-    return None, f"Doppler axis starts at {start} m/s with {delta} m/s bins, neither centred nor FFT order"
 
 
 class _SceneImport:
@@ -380,10 +115,10 @@ class _SceneImport:
     def __init__(self, source: SceneSource, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> None:
         self.source = source
         self.summary = SceneSummary(source.scene_id, str(source.folder))
-        self.opened = [_open(path, src, skip_corrupt, problems) for path in source.files]
+        self.opened = [open_stream(path, src, skip_corrupt, problems) for path in source.files]
         self.summary.streams = [o.summary for o in self.opened]
 
-    def _by_kind(self, name: str) -> list[_Opened]:
+    def _by_kind(self, name: str) -> list[OpenedStream]:
         return [o for o in self.opened if o.stream is not None and o.stream.kind.name == name and o.stream.kind.converted]
 
     def run(self, writer: DatasetWriter) -> None:
@@ -392,7 +127,7 @@ class _SceneImport:
         images = self._keyed(self._by_kind("Image"), "_images")
         points = self._keyed(self._by_kind("TrackerState"), "_points")
         rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
-        sides = _infer_sides(images, scene)
+        sides = assume.infer_sides({serial: _sar_frames(o, probe=True) for serial, o in images.items()}, scene.assumptions)
 
         def rename(serial: str) -> str:
             return sides.get(serial, serial)
@@ -400,21 +135,23 @@ class _SceneImport:
         models = self._models(list(rd_frames))
         assumed_models = set()
         for name, opened in rd_frames.items():
-            first = next((record for _, record in _decoded(opened, probe=True)), None)
-            if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(PAPER_CUBE_SHAPE)):
-                models[name] = _paper_model()
+            first = next(decoded_records(opened, probe=True), None)
+            if name not in models and first is not None and len(first["data"]) == 8 * int(np.prod(assume.PAPER_CUBE_SHAPE)):
+                models[name] = assume.paper_model()
                 assumed_models.add(name)
         radars = sorted({rename(s) for s in images} | {rename(s) for s in points} | set(rd_frames))
-        calibration = {"imu": {"rotation_wxyz": list(EGO_Q_IMU_WXYZ), "translation_m": [0.0, 0.0, 0.0]}}
-        scene.assumptions.append("IMU at the ego origin, axes forward-right-down (ego_T_imu: 180 degrees about x)")
+        calibration = {"imu": assume.imu_entry(scene.assumptions)}
         for radar in radars:
-            calibration[radar] = _radar_entry(radar, models.get(radar), scene, radar in assumed_models)
+            calibration[radar] = assume.radar_entry(radar, models.get(radar), scene.assumptions, radar in assumed_models)
         lidars = self._keyed(self._by_kind("LidarPointsFrame"), "")
         cameras = self._keyed(self._by_kind("CameraIndexRecord"), "")
         for name in list(lidars) + list(cameras):
-            calibration[name] = {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
-            scene.assumptions.append(f"sensor {name!r} pose in the ego frame: identity (no extrinsics in the release)")
-        enu_origin = _enu_origin(tracklog, images, scene)
+            calibration[name] = assume.sensor_entry(name, scene.assumptions)
+        enu_origin = assume.enu_origin(
+            None if tracklog is None else tracklog[1][0],
+            itertools.chain.from_iterable(_sar_frames(opened, probe=True) for opened in images.values()),
+            scene.assumptions,
+        )
         enu = LocalENU(**enu_origin)
         with writer.scene(self.source.scene_id, enu_origin=enu_origin, calibration={"sensors": calibration}) as out:
             if tracklog is not None:
@@ -431,12 +168,12 @@ class _SceneImport:
             for name, opened in cameras.items():
                 self._write_camera_index(out, name, opened)
             for opened in self.opened:
-                _finish(opened)
+                finish_summary(opened)
             out.write_attrs("", {"release_import": {"source": str(self.source.folder), "assumptions": scene.assumptions}})
 
-    def _keyed(self, opened: list[_Opened], suffix: str) -> dict[str, _Opened]:
+    def _keyed(self, opened: list[OpenedStream], suffix: str) -> dict[str, OpenedStream]:
         """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name."""
-        out: dict[str, _Opened] = {}
+        out: dict[str, OpenedStream] = {}
         for item in opened:
             name = _prefix(item.path, suffix) if suffix else None
             if name is None:
@@ -457,9 +194,9 @@ class _SceneImport:
             if item.model is not None:
                 models.append((item, item.model))
             elif item.stream is not None and item.stream.kind.name == "RangeDopplerImageModel":
-                for _, record in _decoded(item):
+                record = next(decoded_records(item), None)
+                if record is not None:
                     models.append((item, rec.rd_model(record)))
-                    break
                 if len(item.stream) > 1:
                     item.summary.skipped.append(f"{len(item.stream) - 1} further model records ignored (the first is used)")
         out = {}
@@ -471,16 +208,14 @@ class _SceneImport:
             elif len(models) == 1:
                 out[name] = models[0][1]
                 models[0][0].summary.written_to = "calibration"
-                self.summary.assumptions.append(
-                    f"range-Doppler model {models[0][0].summary.path} applies to {name!r} (the only model in the scene)"
-                )
+                self.summary.assumptions.append(assume.shared_model(models[0][0].summary.path, name))
         return out
 
-    def _pixel_order(self, name: str, opened: _Opened, points: _Opened | None, lidars: list[_Opened]) -> bool:
+    def _pixel_order(self, name: str, opened: OpenedStream, points: OpenedStream | None, lidars: list[OpenedStream]) -> bool:
         """Check the pixel order against this radar's detections, then the lidar if still undecided (``pixel_order.py``)."""
         frames = []
-        for _, record in _decoded(opened, probe=True):
-            frames.append(rec.sar_frame(opened.stream.kind, record))
+        for frame in _sar_frames(opened, probe=True):
+            frames.append(frame)
             if len(frames) >= 20:
                 break
         if not frames:
@@ -489,38 +224,25 @@ class _SceneImport:
         probes: list[tuple[float, np.ndarray]] = []
         i_fastest, evidence = None, "no detections or lidar points to check against"
         for source in ([points] if points else []) + lidars:
-            for offset, buf, start, end in _iter(source, probe=True):
-                try:
-                    if source.stream.kind.name == "TrackerState":
-                        found = rec.detections(source.stream.kind, buf, start, end)
-                        probe = (found.timestamp_s, found.columns["position_ecef"])
-                    else:
-                        sweep = rec.lidar_sweep(source.stream.kind, buf, start, end)
-                        probe = (sweep.timestamp_s, sweep.position_ecef)
-                except WireError:
-                    continue  # reported when the stream itself is imported
+            if source.stream.kind.name == "TrackerState":
+                known = ((d.timestamp_s, d.columns["position_ecef"]) for d in decoded_records(source, rec.detections, probe=True))
+            else:
+                known = ((s.timestamp_s, s.position_ecef) for s in decoded_records(source, rec.lidar_sweep, probe=True))
+            for probe in known:
                 if probe[0] > last_s:
                     break
                 probes.append(probe)
             i_fastest, evidence = vote_pixel_order(frames, probes)
             if i_fastest is not None:
                 break
-        if i_fastest is None:
-            self.summary.assumptions.append(
-                f"sar/{name}: pixel (i, j) is flat element j*rows + i (the SDK viewer's reading; not verifiable here: {evidence})"
-            )
-            return True
-        order = "j*rows + i (the SDK viewer's reading)" if i_fastest else "i*cols + j (row-major, NOT the SDK viewer's reading)"
-        self.summary.assumptions.append(f"sar/{name}: pixel (i, j) is flat element {order}: checked, {evidence}")
-        return i_fastest
+        return assume.pixel_order(name, i_fastest, evidence, self.summary.assumptions)
 
-    def _write_sar(self, out, name: str, serial: str, opened: _Opened, i_fastest: bool) -> None:
+    def _write_sar(self, out, name: str, serial: str, opened: OpenedStream, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
         holds_seen = set()
         bad: dict[str, int] = {}
         shape = None
-        for _, record in _decoded(opened):
-            frame = rec.sar_frame(opened.stream.kind, record)
+        for frame in _sar_frames(opened):
             try:
                 image, holds = rec.sar_pixels(frame, i_fastest)
             except ValueError as exc:
@@ -547,24 +269,20 @@ class _SceneImport:
         opened.summary.written_to = f"sar/{name}"
         magnitude_only = holds_seen == {"magnitude"}
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
-        self.summary.assumptions += [
-            f"sar/{name}: "
-            + ("magnitude-only (4-byte pixels, read as little-endian uint32)" if magnitude_only else "complex64 pixels"),
-            f"sar/{name}: aperture start/end are not in the release; aperture_ns = [t, t]",
-        ]
+        self.summary.assumptions += assume.sar_pixels_and_aperture(name, magnitude_only)
 
-    def _write_cubes(self, out, name: str, opened: _Opened, model: rec.RangeDopplerModel | None) -> None:
+    def _write_cubes(self, out, name: str, opened: OpenedStream, model: rec.RangeDopplerModel | None) -> None:
         if model is None:
             opened.summary.skipped.append("no RangeDopplerImageModel found for it: the cube shape is unknown")
             return
-        shift, why = _doppler_shift(model)
+        shift, why = assume.doppler_shift(model)
         if shift is None:
             opened.summary.skipped.append(why)
             return
         shape = (model.range_axis[2], model.doppler_axis[2], model.num_rx)
         stamps = _Stamps(opened.summary)
         bad = 0
-        for _, record in _decoded(opened):
+        for record in decoded_records(opened):
             data = record["data"]
             if len(data) != 8 * int(np.prod(shape)):
                 bad += 1
@@ -578,17 +296,12 @@ class _SceneImport:
         if bad:
             opened.summary.skipped.append(f"{bad} frames whose size is not 8 x {shape} bytes")
         opened.summary.written_to = f"radar/{name}"
-        self.summary.assumptions += [f"radar/{name}: {why}", f"radar/{name}: range velocity sign as recorded (unknown convention)"]
+        self.summary.assumptions += assume.cube_axes(name, why)
 
-    def _write_detections(self, out, name: str, opened: _Opened) -> None:
+    def _write_detections(self, out, name: str, opened: OpenedStream) -> None:
         stamps = _Stamps(opened.summary)
         times, offsets, parts = [], [0], []
-        for offset, buf, start, end in _iter(opened):
-            try:
-                found = rec.detections(opened.stream.kind, buf, start, end)
-            except WireError as exc:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
-                continue
+        for found in decoded_records(opened, rec.detections):
             ns = stamps.take(found.timestamp_s)
             if ns is None:
                 continue
@@ -604,22 +317,16 @@ class _SceneImport:
         opened.summary.written_to = f"detections/{name}"
         if nan:
             opened.summary.notes.append(f"{nan} detections with NaN ECEF position kept as NaN")
-        meaning = "amplitude / confidence" if opened.stream.kind.generation == "2020" else "magnitude / doa_snr"
-        self.summary.assumptions.append(f"detections/{name}: magnitude and snr are the release's {meaning} (fields 3, 10)")
+        self.summary.assumptions.append(assume.detection_fields(name, opened.stream.kind.generation))
 
-    def _write_lidar(self, out, name: str, opened: _Opened, enu: LocalENU) -> None:
+    def _write_lidar(self, out, name: str, opened: OpenedStream, enu: LocalENU) -> None:
         stamps = _Stamps(opened.summary)
-        ecef_parts, dropped, frame_note = [], 0, None
-        for offset, buf, start, end in _iter(opened):
-            try:
-                sweep = rec.lidar_sweep(opened.stream.kind, buf, start, end)
-            except WireError as exc:
-                opened.stream.report_problem(offset, end - offset, f"record does not decode as {opened.stream.kind.label}: {exc}")
-                continue
+        ecef_parts, dropped, points_in_enu = [], 0, False
+        for sweep in decoded_records(opened, rec.lidar_sweep):
             local = sweep.position_local
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
-                frame_note = "enu"
+                points_in_enu = True
             keep = np.all(np.isfinite(local), axis=1) & np.all(np.isfinite(sweep.position_ecef), axis=1)
             dropped += int(np.count_nonzero(~keep))
             ns = stamps.take(sweep.timestamp_s)
@@ -635,20 +342,14 @@ class _SceneImport:
         opened.summary.written_to = f"lidar/{name}"
         if dropped:
             opened.summary.skipped.append(f"{dropped} points with NaN positions")
-        if frame_note:
+        if points_in_enu:
             out.write_attrs(f"lidar/{name}", {"points_frame": "enu"})
-            self.summary.assumptions.append(
-                f"lidar/{name}: the release gives no local positions (or ECEF ones), so points are in the scene's ENU frame"
-            )
-        else:
-            self.summary.assumptions.append(
-                f"lidar/{name}: LidarPoint.position_local taken as the lidar frame (unknown in the release)"
-            )
+        self.summary.assumptions.append(assume.lidar_frame(name, points_in_enu))
 
-    def _write_camera_index(self, out, name: str, opened: _Opened) -> None:
+    def _write_camera_index(self, out, name: str, opened: OpenedStream) -> None:
         stamps = _Stamps(opened.summary)
         times, index = [], []
-        for _, record in _decoded(opened):
+        for record in decoded_records(opened):
             ns = stamps.take(record["timestamp"]["common"])
             if ns is not None:
                 times.append(ns)
@@ -657,7 +358,7 @@ class _SceneImport:
         if times:
             out.write_camera_index(name, times, index)
             opened.summary.written_to = f"camera_index/{name}"
-            self.summary.assumptions.append(f"camera_index/{name}: the video itself is not converted (container unknown)")
+            self.summary.assumptions.append(assume.camera_video(name))
 
     def close(self) -> None:
         for opened in self.opened:
