@@ -25,7 +25,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import orjson
 
-from zendar_leaderboard import entries as entries_mod
+from zendar_leaderboard import ranking
 from zendar_leaderboard.ground_truth import TestSplit
 from zendar_leaderboard.pages import entry_page, ranking_page, submit_page
 from zendar_leaderboard.scheduler import ScoringService
@@ -233,11 +233,11 @@ class Handler(BaseHTTPRequestHandler):
         band = sort if sort in BANDS else "all"
         store = self.settings.store
         if path == "/api/leaderboard":
-            self._json(HTTPStatus.OK, entries_mod.leaderboard(store, band))
+            self._json(HTTPStatus.OK, ranking.leaderboard(store, band))
         elif path == "/leaderboard.json":
-            self._json(HTTPStatus.OK, entries_mod.leaderboard(store, band))
+            self._json(HTTPStatus.OK, ranking.leaderboard(store, band))
         elif path == "/leaderboard.csv":
-            text = entries_mod.to_csv(entries_mod.leaderboard(store, band))
+            text = ranking.to_csv(ranking.leaderboard(store, band))
             self._send(HTTPStatus.OK, text.encode(), "text/csv; charset=utf-8")
         elif path in ("/", "/index.html"):
             page = _ranking_html(store, band)
@@ -253,7 +253,7 @@ class Handler(BaseHTTPRequestHandler):
 
     def _entry(self, submission_id: int) -> None:
         store = self.settings.store
-        found = entry_parts(store, submission_id)
+        found = ranking.entry_parts(store, submission_id)
         if found is None:
             self._error(HTTPStatus.NOT_FOUND, f"no entry {submission_id} on the leaderboard")
             return
@@ -274,16 +274,14 @@ class Handler(BaseHTTPRequestHandler):
         if submission.status == "queued":
             answer["position"] = store.queue_position(submission.id)
         if submission.status == "scored":
-            score = store.score(submission.id)
-            closed = store.round_closed()
-            part = (score.private if closed and score.private else score.public) or {}
+            part_name, part = ranking.shown_score(store.score(submission.id), store.round_closed())
             answer["ap"] = part.get("ap", {band: None for band in BANDS})
             if part.get("ci"):
                 answer["ci"] = part["ci"]
-            answer["part"] = "private" if closed and score.private else "public"
+            answer["part"] = part_name
         if submission.status == "failed":
             answer["error"] = submission.error
-        answer["submitted_at"] = entries_mod.iso_utc(submission.submitted_at)
+        answer["submitted_at"] = ranking.iso_utc(submission.submitted_at)
         answer["sha256"] = submission.sha256
         self._json(HTTPStatus.OK, answer)
 
@@ -299,24 +297,10 @@ def _ranking_html(store: Store, band: str) -> str:
     generation = store.generation()
     cached = _page_cache.get(key)
     if cached is None or cached[0] != generation:
-        board = entries_mod.leaderboard(store, band)
+        board = ranking.leaderboard(store, band)
         page = ranking_page(board, entry_href=lambda i: f"/entry/{i}", static=False, nonce=_NONCE_SLOT)
         cached = _page_cache[key] = (generation, page)
     return cached[1]
-
-
-def entry_parts(store: Store, submission_id: int) -> tuple[dict, dict[str, dict | None]] | None:
-    """An entry shown on the leaderboard and its per-part scores (private only once closed)."""
-    submission = store.submission(submission_id)
-    if submission is None or submission.hidden or submission.status != "scored":
-        return None
-    score = store.score(submission_id)
-    closed = store.round_closed()
-    entry = entries_mod.entry_dict(submission, score, closed)
-    parts = {"public": score.public}
-    if closed:
-        parts["private"] = score.private
-    return entry, parts
 
 
 class LeaderboardHTTPServer(ThreadingHTTPServer):

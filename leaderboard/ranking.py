@@ -1,7 +1,9 @@
 """The ranking as data: what ``/api/leaderboard``, the pages and the static export show.
 
 While a round is open each entry shows its score on the public part of the test split; once an
-administrator closes the round, entries are ranked by the private part and show both.
+administrator closes the round, entries are ranked by the private part and show both. This module
+is the one place that decides which submissions are on the leaderboard, which part of a score is
+shown and in what order.
 
 AP (``ap``, ``ap_public``, interval ends in ``ci``, the CSV's ``ap_*`` and ``ci_*`` columns) is a
 fraction in [0, 1] rounded to 0.001 = 0.1 AP points, null (an empty CSV cell) for a band without
@@ -29,9 +31,20 @@ def shown_part(closed: bool) -> str:
     return "private" if closed else "public"
 
 
+def shown_score(score: ScoreRow, closed: bool) -> tuple[str, dict]:
+    """The part a score is shown for and that part's scores.
+
+    The private part once the round is closed (when it was scored), else the public part (an empty
+    dict when that part is empty).
+    """
+    if closed and score.private:
+        return "private", score.private
+    return "public", score.public or {}
+
+
 def entry_dict(submission: SubmissionRow, score: ScoreRow, closed: bool) -> dict[str, Any]:
     """One entry (without its rank) as served by ``/api/leaderboard``."""
-    part = getattr(score, shown_part(closed)) or getattr(score, "public") or {}
+    part_name, part = shown_score(score, closed)
     entry: dict[str, Any] = {
         "id": submission.id,
         "method": submission.meta.get("method", ""),
@@ -45,12 +58,29 @@ def entry_dict(submission: SubmissionRow, score: ScoreRow, closed: bool) -> dict
     # The contact address stays with the organisers: a public page would hand it to harvesters.
     entry["meta"] = {key: value for key, value in submission.meta.items() if key != "contact"}
     entry["submitted_at"] = iso_utc(submission.submitted_at)
-    entry["part"] = shown_part(closed) if getattr(score, shown_part(closed)) else "public"
+    entry["part"] = part_name
     entry["protocol_version"] = score.protocol_version
     entry["evaluator_version"] = score.evaluator_version
     entry["submission_sha256"] = score.submission_sha256
     entry["gt_sha256"] = score.gt_sha256
     return entry
+
+
+def entry_parts(store: Store, submission_id: int) -> tuple[dict, dict[str, dict | None]] | None:
+    """An entry shown on the leaderboard and its per-part scores (private only once closed).
+
+    None when the submission is not on the leaderboard (missing, hidden or not scored).
+    """
+    submission = store.submission(submission_id)
+    if submission is None or submission.hidden or submission.status != "scored":
+        return None
+    score = store.score(submission_id)
+    closed = store.round_closed()
+    entry = entry_dict(submission, score, closed)
+    parts = {"public": score.public}
+    if closed:
+        parts["private"] = score.private
+    return entry, parts
 
 
 def _rank_key(entry: dict, band: str) -> tuple:
