@@ -12,7 +12,6 @@ ground truth; only the HTML pages turn it into percent.
 
 from __future__ import annotations
 
-import copy
 import csv
 import io
 import time
@@ -102,26 +101,13 @@ def ranked(entries: list[dict], band: str = "all") -> list[dict]:
     return [{"rank": e.pop("rank"), **e} for e in ordered]
 
 
-_cache: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
-
-
 def leaderboard(store: Store, band: str = "all") -> dict[str, Any]:
-    """The whole ranking: ``{"entries": [...], "round": {...}}``.
+    """The whole ranking, sorted by ``band``: ``{"entries": [...], "round": {...}, "sorted_by",
+    "generated_at"}``.
 
-    Built once per database generation and band, then served from memory: readers cost a one-row
-    query until something changes.
+    Built from the database on each call; the server keeps one per database generation
+    (:class:`zendar_leaderboard.server.RankingCache`).
     """
-    key = (str(store.path), band)
-    generation = store.generation()
-    cached = _cache.get(key)
-    if cached is not None and cached[0] == generation:
-        return copy.deepcopy(cached[1])
-    board = _build(store, band)
-    _cache[key] = (generation, board)
-    return copy.deepcopy(board)
-
-
-def _build(store: Store, band: str) -> dict[str, Any]:
     closed = store.round_closed()
     entries = [entry_dict(sub, score, closed) for sub, score in store.scored_entries()]
     return {
