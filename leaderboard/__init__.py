@@ -7,7 +7,12 @@ Installed as ``zendar_leaderboard`` (the repository folder is ``leaderboard/``).
 - ``scoring`` — per-part scores through ``zendar_dataset.eval.evaluate``, rounded for display;
 - ``store`` — SQLite (WAL) records of teams, submissions and scores;
 - ``worker`` and ``scheduler`` — the scorer process, its limits and the watchdog;
-- ``pages``, ``export`` and ``server`` — the HTML pages, the static export and the HTTP API;
+- ``ranking`` — the ranking as data: which entries are shown, which part of their score, in what
+  order, and as CSV;
+- ``pages`` — the HTML pages, rendered from the Jinja2 templates in ``templates/``;
+- ``export`` — the static site (ranking, pages; no server);
+- ``routes`` and ``server`` — the HTTP API's route table and views; the server, its settings and
+  its ranking cache;
 - ``client`` and ``cli`` — ``zendar-leaderboard``.
 
 See docs/leaderboard.md.

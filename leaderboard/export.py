@@ -14,9 +14,8 @@ import orjson
 
 from zendar_dataset.atomic_files import write_bytes_atomic
 from zendar_dataset.errors import ZendarError
-from zendar_leaderboard import entries as entries_mod
+from zendar_leaderboard import ranking
 from zendar_leaderboard.pages import entry_page, ranking_page
-from zendar_leaderboard.server import entry_parts
 from zendar_leaderboard.store import Store
 
 
@@ -32,10 +31,10 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
     if out.exists() and not out.is_dir():
         raise ZendarError(f"output {str(out)!r} exists and is not a folder")
     (out / "entry").mkdir(parents=True, exist_ok=True)
-    board = entries_mod.leaderboard(store)
+    board = ranking.leaderboard(store)
     written = []
     for entry in board["entries"]:
-        found = entry_parts(store, entry["id"])
+        found = ranking.entry_parts(store, entry["id"])
         if found is None:  # hidden or deleted since the ranking was read
             continue
         page = entry_page(*found, static=True, root="../")
@@ -44,7 +43,7 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
         written.append(path)
     files = {
         "leaderboard.json": orjson.dumps(board, option=orjson.OPT_INDENT_2),
-        "leaderboard.csv": entries_mod.to_csv(board).encode(),
+        "leaderboard.csv": ranking.to_csv(board).encode(),
         "index.html": ranking_page(board, entry_href=lambda i: f"entry/{i}.html", static=True).encode(),
     }
     for name, data in files.items():

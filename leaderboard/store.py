@@ -122,24 +122,32 @@ class Store:
     Parameters
     ----------
     path
-        The SQLite file; created with its tables when missing.
+        The SQLite file; created with its tables when missing (unless ``read_only``).
+    read_only
+        Open an existing database for reading only (the scorer process: only the server writes).
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, read_only: bool = False) -> None:
         self.path = Path(path)
+        self.read_only = read_only
         self._local = threading.local()
         if not self.path.parent.is_dir():
             raise ZendarError(f"database folder {str(self.path.parent)!r} does not exist")
-        self._connection().executescript(_SCHEMA)  # idempotent; runs in its own transaction
+        if read_only:
+            self._connection()  # a missing or unreadable file fails here, not at the first read
+        else:
+            self._connection().executescript(_SCHEMA)  # idempotent; runs in its own transaction
 
     def _connection(self) -> sqlite3.Connection:
         db = getattr(self._local, "db", None)
         if db is None:
-            db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None, check_same_thread=False)
+            target, uri = (f"file:{self.path}?mode=ro", True) if self.read_only else (self.path, False)
+            db = sqlite3.connect(target, uri=uri, timeout=30.0, isolation_level=None, check_same_thread=False)
             db.row_factory = sqlite3.Row
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")
-            db.execute("PRAGMA foreign_keys=ON")
+            if not self.read_only:
+                db.execute("PRAGMA journal_mode=WAL")
+                db.execute("PRAGMA synchronous=FULL")
+                db.execute("PRAGMA foreign_keys=ON")
             self._local.db = db
         return db
 

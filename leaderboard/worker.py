@@ -17,7 +17,6 @@ import ctypes
 import os
 import resource
 import signal
-import sqlite3
 import sys
 import traceback
 
@@ -25,6 +24,7 @@ import orjson
 
 from zendar_leaderboard.ground_truth import load_test_split
 from zendar_leaderboard.scoring import score_submission
+from zendar_leaderboard.store import Store
 from zendar_leaderboard.submission import check_submission
 
 READY = "ready"
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     answers = os.fdopen(os.dup(1), "wb", buffering=0)
     os.dup2(2, 1)
     test_split = load_test_split(args.gt, args.split)
-    db = sqlite3.connect(f"file:{args.db}?mode=ro", uri=True, timeout=30.0)
+    store = Store(args.db, read_only=True)
     # Compile the evaluator's kernels before the limit and before the first submission.
     warm = {"meta": {}, "results": {f: [] for f in test_split.frames}}
     score_submission(warm, test_split, bootstrap=min(args.bootstrap, 10))
@@ -69,11 +69,11 @@ def main(argv: list[str] | None = None) -> int:
         submission_id = orjson.loads(line)["id"]
         answer: dict = {"id": submission_id, "ok": False}
         try:
-            row = db.execute("SELECT body FROM bodies WHERE submission_id = ?", (submission_id,)).fetchone()
-            if row is None:
+            body = store.body(submission_id)
+            if body is None:
                 answer["error"] = "the submission was deleted before it was scored"
             else:
-                checked = check_submission(bytes(row[0]), list(test_split.frames))
+                checked = check_submission(body, list(test_split.frames))
                 if not checked.ok:
                     answer["error"] = f"the submission no longer passes validation ({len(checked.problems)} problems)"
                 else:

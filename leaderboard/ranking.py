@@ -1,7 +1,9 @@
 """The ranking as data: what ``/api/leaderboard``, the pages and the static export show.
 
 While a round is open each entry shows its score on the public part of the test split; once an
-administrator closes the round, entries are ranked by the private part and show both.
+administrator closes the round, entries are ranked by the private part and show both. This module
+is the one place that decides which submissions are on the leaderboard, which part of a score is
+shown and in what order.
 
 AP (``ap``, ``ap_public``, interval ends in ``ci``, the CSV's ``ap_*`` and ``ci_*`` columns) is a
 fraction in [0, 1] rounded to 0.001 = 0.1 AP points, null (an empty CSV cell) for a band without
@@ -10,7 +12,6 @@ ground truth; only the HTML pages turn it into percent.
 
 from __future__ import annotations
 
-import copy
 import csv
 import io
 import time
@@ -29,9 +30,20 @@ def shown_part(closed: bool) -> str:
     return "private" if closed else "public"
 
 
+def shown_score(score: ScoreRow, closed: bool) -> tuple[str, dict]:
+    """The part a score is shown for and that part's scores.
+
+    The private part once the round is closed (when it was scored), else the public part (an empty
+    dict when that part is empty).
+    """
+    if closed and score.private:
+        return "private", score.private
+    return "public", score.public or {}
+
+
 def entry_dict(submission: SubmissionRow, score: ScoreRow, closed: bool) -> dict[str, Any]:
     """One entry (without its rank) as served by ``/api/leaderboard``."""
-    part = getattr(score, shown_part(closed)) or getattr(score, "public") or {}
+    part_name, part = shown_score(score, closed)
     entry: dict[str, Any] = {
         "id": submission.id,
         "method": submission.meta.get("method", ""),
@@ -45,12 +57,29 @@ def entry_dict(submission: SubmissionRow, score: ScoreRow, closed: bool) -> dict
     # The contact address stays with the organisers: a public page would hand it to harvesters.
     entry["meta"] = {key: value for key, value in submission.meta.items() if key != "contact"}
     entry["submitted_at"] = iso_utc(submission.submitted_at)
-    entry["part"] = shown_part(closed) if getattr(score, shown_part(closed)) else "public"
+    entry["part"] = part_name
     entry["protocol_version"] = score.protocol_version
     entry["evaluator_version"] = score.evaluator_version
     entry["submission_sha256"] = score.submission_sha256
     entry["gt_sha256"] = score.gt_sha256
     return entry
+
+
+def entry_parts(store: Store, submission_id: int) -> tuple[dict, dict[str, dict | None]] | None:
+    """An entry shown on the leaderboard and its per-part scores (private only once closed).
+
+    None when the submission is not on the leaderboard (missing, hidden or not scored).
+    """
+    submission = store.submission(submission_id)
+    if submission is None or submission.hidden or submission.status != "scored":
+        return None
+    score = store.score(submission_id)
+    closed = store.round_closed()
+    entry = entry_dict(submission, score, closed)
+    parts = {"public": score.public}
+    if closed:
+        parts["private"] = score.private
+    return entry, parts
 
 
 def _rank_key(entry: dict, band: str) -> tuple:
@@ -72,26 +101,13 @@ def ranked(entries: list[dict], band: str = "all") -> list[dict]:
     return [{"rank": e.pop("rank"), **e} for e in ordered]
 
 
-_cache: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
-
-
 def leaderboard(store: Store, band: str = "all") -> dict[str, Any]:
-    """The whole ranking: ``{"entries": [...], "round": {...}}``.
+    """The whole ranking, sorted by ``band``: ``{"entries": [...], "round": {...}, "sorted_by",
+    "generated_at"}``.
 
-    Built once per database generation and band, then served from memory: readers cost a one-row
-    query until something changes.
+    Built from the database on each call; the server keeps one per database generation
+    (:class:`zendar_leaderboard.server.RankingCache`).
     """
-    key = (str(store.path), band)
-    generation = store.generation()
-    cached = _cache.get(key)
-    if cached is not None and cached[0] == generation:
-        return copy.deepcopy(cached[1])
-    board = _build(store, band)
-    _cache[key] = (generation, board)
-    return copy.deepcopy(board)
-
-
-def _build(store: Store, band: str) -> dict[str, Any]:
     closed = store.round_closed()
     entries = [entry_dict(sub, score, closed) for sub, score in store.scored_entries()]
     return {
