@@ -273,6 +273,23 @@ def walk(group: Any, prefix: str = "") -> list[tuple[str, Any]]:
     return out
 
 
+def unreadable_metadata(group: Any, prefix: str = "") -> list[str]:
+    """A :class:`MetadataError` message for every node below ``group`` whose metadata is unreadable.
+
+    Unlike :func:`walk` it goes on past such a node (without entering it), so each is listed.
+    """
+    found = []
+    for name in member_names(group):
+        try:
+            node = get_node(group, name)
+        except MetadataError as exc:
+            found.append(f"{prefix}{exc}")
+            continue
+        if is_group(node):
+            found.extend(unreadable_metadata(node, f"{prefix}{name}/"))
+    return found
+
+
 def require_group(root: Any, path: str) -> Any:
     return root.require_group(path)
 
