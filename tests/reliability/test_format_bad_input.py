@@ -7,10 +7,12 @@ from __future__ import annotations
 import json
 import pathlib
 
+import numpy as np
 import pytest
+import zarr
 
-from tests.format.conftest import make_small_dataset
-from tests.format.helpers import set_attr
+from tests.format.conftest import make_dataset, make_small_dataset
+from tests.format.helpers import corrupt_chunk, crc32c_hex, reconsolidate, set_attr
 from tests.reliability.outputs_helpers import assert_one_line_failure, run_in_process, run_tool
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import open_dataset
@@ -127,6 +129,55 @@ def test_corrupt_array_metadata_is_one_named_problem_among_the_others(zarr_root,
     assert any(message in p for p in info.value.problems)
     result = run_in_process("zendar-data", "validate", zarr_root)
     assert result.returncode == 2 and "Traceback" not in result.stderr
+
+
+@pytest.fixture(scope="module")
+def scenes_template(tmp_path_factory) -> pathlib.Path:
+    """Four valid zarr scenes; s0's labels also carry the optional field num_radar_scatterers."""
+    root = make_dataset(tmp_path_factory.mktemp("scenes") / "ds", "zarr")
+    scene = root / "scenes" / "s0.zarr"
+    values = np.array([3, 5], dtype=np.int64)  # one per label of s0
+    node = zarr.open_group(str(scene), mode="a").create_array(
+        "labels/moving_cars/num_radar_scatterers", shape=values.shape, dtype=values.dtype, chunks=values.shape
+    )
+    node[...] = values
+    node.attrs["chunk_crc32c"] = crc32c_hex(values, values.shape[0])
+    reconsolidate(scene)
+    assert validate_dataset(root) == []
+    return root
+
+
+_UNKNOWN_DTYPE = (_with(data_type="foo"), "ValueError: No Zarr data type found that matches 'foo'")
+_UNKNOWN_FORMAT = (_with(zarr_format=7), "ValueError: Invalid zarr_format. Expected one of 2 or 3. Got 7.")
+UNREADABLE_METADATA = {
+    "lidar/top/points": _UNKNOWN_DTYPE,
+    "labels/moving_cars/num_radar_scatterers": _UNKNOWN_DTYPE,  # an optional field
+    "radar/left/cube": _UNKNOWN_DTYPE,
+    "radar/left": _UNKNOWN_FORMAT,  # a sensor's group, whose arrays the schema checks open directly
+    "labels": _UNKNOWN_FORMAT,
+}
+
+
+@pytest.mark.parametrize("node_path", list(UNREADABLE_METADATA))
+def test_unreadable_metadata_is_one_problem_naming_the_scene_and_validate_goes_on(scenes_template, tmp_path, node_path):
+    import shutil
+
+    edit, found = UNREADABLE_METADATA[node_path]
+    root = pathlib.Path(shutil.copytree(scenes_template, tmp_path / "ds"))
+    _edit_metadata(root / "scenes" / "s0.zarr", node_path, edit)
+    corrupt_chunk(root / "scenes" / "s1.zarr", "sar/left/image", 1)  # an independent problem in another scene
+    problems = validate_dataset(root)
+    # Exactly these two: the other arrays of s0 and the scenes s2, s3 were checked and are valid.
+    assert len(problems) == 2, problems
+    assert problems[0] == f"s0: {node_path}: expected readable metadata, found {found}"
+    assert problems[1].startswith("s1: sar/left/image: chunk [1, 0, 0]: expected a readable chunk"), problems
+    result = run_in_process("zendar-data", "validate", root)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stdout.splitlines() == problems
+    assert result.stderr == f"{root}: 2 format violation(s)\n"
+    # convert refuses the same store with the same words.
+    result = run_in_process("zendar-data", "convert", root, tmp_path / "out", "--to", "hdf5")
+    assert_one_line_failure(result, 2, problems[0])
 
 
 def test_a_claimed_length_of_ten_to_the_fifteen(zarr_root):

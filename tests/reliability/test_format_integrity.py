@@ -1,6 +1,7 @@
 """Silent corruption is caught: every chunk's checksum is recorded when written, verified by
 ``validate`` (every mismatch, named by scene, array and chunk) and by the loader on request;
-missing chunks follow the Zarr v3 rule exactly as docs/format.md states it."""
+missing chunks follow the Zarr v3 rule exactly as docs/format.md states it.  The promise is every
+value as written: a stored byte that changes no value passes, as the README and docs/format.md say."""
 
 from __future__ import annotations
 
@@ -113,6 +114,60 @@ def test_convert_carries_checksums_and_refuses_a_corrupt_source(tmp_path, source
     with pytest.raises(ZendarFormatError, match=r"s0: radar/left/cube: chunk \[1, 0, 0, 0\]: .* the source is corrupt"):
         convert_dataset(root, tmp_path / "again", target)
     assert not (tmp_path / "again").exists()
+
+
+REPOSITORY = pathlib.Path(__file__).resolve().parents[2]
+
+
+def _level(line: str) -> int:
+    """A Markdown heading's level (``## …`` is 2); 0 for other lines."""
+    return len(line) - len(line.lstrip("#")) if line.startswith("#") else 0
+
+
+def _section(path: pathlib.Path, heading: str) -> str:
+    """The text of ``path`` under ``heading`` up to the next heading as high, on one line."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = lines.index(heading)
+    end = next((i for i in range(start + 1, len(lines)) if 0 < _level(lines[i]) <= _level(heading)), len(lines))
+    return " ".join(" ".join(lines[start + 1 : end]).split())
+
+
+def test_the_checksum_promise_is_every_value_as_written(tmp_path):
+    """A changed stored byte that changes no value (the padding of an edge chunk beyond the array's
+    bounds) passes validate, the verifying loader and convert; the README and docs/format.md say
+    what is guaranteed exactly: every value as written, not every byte, and why."""
+    root = make_small_dataset(tmp_path / "ds", "zarr")
+    array_path = "lidar/top/points"  # fewer rows than one chunk of 65 536, compressed
+    stored = zarr.open_array(str(_scene(root, "zarr") / array_path), mode="r")
+    values = stored[...]
+    n_rows, chunk_rows = values.shape[0], stored.chunks[0]
+    assert n_rows < chunk_rows
+    # The same chunk encoded by the same codecs, with values in the padding where the writer put zeros.
+    twin = zarr.create_array(
+        str(tmp_path / "twin.zarr"), shape=stored.chunks, chunks=stored.chunks, dtype=stored.dtype,
+        serializer=stored.serializer, compressors=stored.compressors, fill_value=stored.fill_value,
+    )
+    padded = np.full(stored.chunks, 7.0, dtype=stored.dtype)
+    padded[:n_rows] = values
+    twin[...] = padded
+    key = pathlib.Path("c", *["0"] * stored.ndim)
+    chunk = _scene(root, "zarr") / array_path / key
+    written = chunk.read_bytes()
+    chunk.write_bytes((tmp_path / "twin.zarr" / key).read_bytes())
+    assert chunk.read_bytes() != written
+    np.testing.assert_array_equal(zarr.open_array(str(_scene(root, "zarr") / array_path), mode="r")[...], values)
+    assert validate_dataset(root) == []
+    with open_dataset(root).open_scene("s0", verify_checksums=True) as scene:
+        np.testing.assert_array_equal(scene.array(array_path)[:], values)
+    convert_dataset(root, tmp_path / "converted", "hdf5")
+
+    promise = _section(REPOSITORY / "README.md", "## Reliability")
+    assert "every byte" not in promise
+    assert "passes has every value of every chunk as written" in promise
+    assert "a changed stored byte that changes no value" in promise
+    checksums = _section(REPOSITORY / "docs" / "format.md", "### Chunk checksums (a backward-compatible addition to format v1)")
+    assert "every value as written, not every stored byte" in checksums
+    assert "padding" in checksums and "`zendar-data convert`" in checksums
 
 
 def _rewrite_with_plain_zarr(scene: pathlib.Path, zero_frames: dict[str, int]) -> None:

@@ -74,7 +74,8 @@ def test_convert_running_out_of_space_midway_exits_1_and_leaves_nothing(tmp_path
 def test_synth_running_out_of_space_midway_exits_1(tmp_path, backend):
     with small_file_system(tmp_path / "disk", "1m") as disk:
         result = run_tool(*_synth(None, disk, backend))
-        assert_one_line_failure(result, 1, "No space left on device")
+        # The scene and its store's path (the raw write of a zarr chunk names no file of its own).
+        assert_one_line_failure(result, 1, "No space left on device", "scene-0000", str(disk / "out" / "scenes"))
         assert not (disk / "out" / "dataset.json").exists()
         assert hidden_entries(disk / "out" / "scenes") == []
 

@@ -148,7 +148,8 @@ def check_stream(root: Any, scene: str, stream: str, problems: list[str], checks
             arrays[spec.name] = node
     if stream == LABELS:
         for spec in LABEL_OPTIONAL_FIELDS:
-            if stores.get_node(root, f"{stream}/{spec.name}") is not None:
+            # An optional field with unreadable metadata is one problem (noted here), not a missing array.
+            if get_node(root, scene, f"{stream}/{spec.name}", problems) is not None:
                 node = check_array(root, scene, stream, spec, n, problems, checksummed)
                 if node is not None:
                     arrays[spec.name] = node

@@ -97,7 +97,11 @@ def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str, sce
         root_attrs = stores.read_attrs(source_root)
         verify = root_attrs.get(checksums.ROOT_ATTR) == checksums.ALGORITHM
         stores.write_attrs(target.root, {**root_attrs, checksums.ROOT_ATTR: checksums.ALGORITHM})
-        for path, node in stores.walk(source_root):
+        try:
+            nodes = stores.walk(source_root)
+        except stores.MetadataError as exc:
+            raise ZendarFormatError(f"{scene}: {exc}") from None
+        for path, node in nodes:
             if stores.is_group(node):
                 stores.write_attrs(target.root.require_group(path), stores.read_attrs(node))
             else:

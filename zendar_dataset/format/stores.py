@@ -22,6 +22,8 @@ import os
 import pathlib
 import sys
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -106,10 +108,37 @@ class OpenStore:
             self._closers.pop()()
 
 
+class _FileNamingLocalStore(zarr.storage.LocalStore):
+    """A zarr ``LocalStore`` whose failed writes name the file, so a full disk names the store's path.
+
+    The OS error of a raw write carries no filename (``[Errno 28] No space left on device``);
+    it is raised again naming the file written, as :class:`GuardedFile` does for HDF5 stores.
+    """
+
+    async def set(self, key: str, value: Any) -> None:
+        with _naming_file(self.root / key):
+            await super().set(key, value)
+
+    async def set_if_not_exists(self, key: str, value: Any) -> None:
+        with _naming_file(self.root / key):
+            await super().set_if_not_exists(key, value)
+
+
+@contextmanager
+def _naming_file(path: pathlib.Path) -> Iterator[None]:
+    """Raise an OS error that names no file again, naming ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+
+
 def create_store(path: pathlib.Path, backend: str) -> OpenStore:
     """Create an empty store at ``path`` (which must not exist) for writing."""
     if backend == "zarr":
-        root = zarr.open_group(zarr.storage.LocalStore(str(path)), mode="w-", zarr_format=3)
+        root = zarr.open_group(_FileNamingLocalStore(str(path)), mode="w-", zarr_format=3)
         return OpenStore(backend, root)
     if backend == "hdf5":
         guard = GuardedFile(path)
@@ -131,7 +160,7 @@ def consolidate(path: pathlib.Path) -> None:
     """
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part")
-        zarr.consolidate_metadata(zarr.storage.LocalStore(str(path)))
+        zarr.consolidate_metadata(_FileNamingLocalStore(str(path)))
 
 
 def open_store(
@@ -242,6 +271,23 @@ def walk(group: Any, prefix: str = "") -> list[tuple[str, Any]]:
         if is_group(node):
             out.extend(walk(node, path + "/"))
     return out
+
+
+def unreadable_metadata(group: Any, prefix: str = "") -> list[str]:
+    """A :class:`MetadataError` message for every node below ``group`` whose metadata is unreadable.
+
+    Unlike :func:`walk` it goes on past such a node (without entering it), so each is listed.
+    """
+    found = []
+    for name in member_names(group):
+        try:
+            node = get_node(group, name)
+        except MetadataError as exc:
+            found.append(f"{prefix}{exc}")
+            continue
+        if is_group(node):
+            found.extend(unreadable_metadata(node, f"{prefix}{name}/"))
+    return found
 
 
 def require_group(root: Any, path: str) -> Any:
