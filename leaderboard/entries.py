@@ -16,6 +16,7 @@ import io
 import time
 from typing import Any
 
+from zendar_dataset.eval.protocol import ALL_BAND
 from zendar_leaderboard.scoring import BANDS
 from zendar_leaderboard.store import ScoreRow, Store, SubmissionRow
 
@@ -59,7 +60,7 @@ def _rank_key(entry: dict, band: str) -> tuple:
     return (ap is None, -(ap or 0.0), entry["submitted_at"], entry["id"])
 
 
-def ranked(entries: list[dict], band: str = "all") -> list[dict]:
+def ranked(entries: list[dict], band: str = ALL_BAND) -> list[dict]:
     """Entries sorted by ``band`` (descending AP), each with its ``rank`` (equal AP, equal rank)."""
     ordered = sorted(entries, key=lambda e: _rank_key(e, band))
     previous = object()
@@ -75,7 +76,7 @@ def ranked(entries: list[dict], band: str = "all") -> list[dict]:
 _cache: dict[tuple[str, str], tuple[int, dict[str, Any]]] = {}
 
 
-def leaderboard(store: Store, band: str = "all") -> dict[str, Any]:
+def leaderboard(store: Store, band: str = ALL_BAND) -> dict[str, Any]:
     """The whole ranking: ``{"entries": [...], "round": {...}}``.
 
     Built once per database generation and band, then served from memory: readers cost a one-row

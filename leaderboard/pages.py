@@ -15,7 +15,7 @@ import html
 from collections.abc import Callable
 from typing import Any
 
-from zendar_dataset.eval.protocol import BANDS_M, MATCH_DISTANCE_M
+from zendar_dataset.eval.protocol import ALL_BAND, BANDS_M, MATCH_DISTANCE_M
 from zendar_leaderboard.scoring import BANDS, format_ap_percent
 
 TITLE = "Zendar radar benchmark: moving-car detection"
@@ -183,7 +183,7 @@ def ranking_page(
 ) -> str:
     """The ranking as HTML (sortable by each band; intervals under the AP when known)."""
     closed = board["round"]["closed"]
-    sorted_by = board.get("sorted_by", "all")
+    sorted_by = board.get("sorted_by", ALL_BAND)
     if closed:
         note = ("The round is closed: entries are ranked by the <b>private</b> part of the test split; "
                 "the public part's AP is shown in brackets.")

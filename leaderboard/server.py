@@ -25,6 +25,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import orjson
 
+from zendar_dataset.eval.protocol import ALL_BAND
 from zendar_leaderboard import entries as entries_mod
 from zendar_leaderboard.ground_truth import TestSplit
 from zendar_leaderboard.pages import entry_page, ranking_page, submit_page
@@ -229,8 +230,8 @@ class Handler(BaseHTTPRequestHandler):
     def do_GET(self) -> None:
         url = urlsplit(self.path)
         path, query = url.path, parse_qs(url.query)
-        sort = query.get("sort", ["all"])[0]
-        band = sort if sort in BANDS else "all"
+        sort = query.get("sort", [ALL_BAND])[0]
+        band = sort if sort in BANDS else ALL_BAND
         store = self.settings.store
         if path == "/api/leaderboard":
             self._json(HTTPStatus.OK, entries_mod.leaderboard(store, band))
