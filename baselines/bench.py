@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate
-from zendar_dataset.eval.report import write_metrics
+from zendar_dataset.eval.report import read_metrics, write_metrics
 from zendar_dataset.format.reader import open_dataset
 
 from zendar_baselines.code_version import code_version
@@ -139,7 +139,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
     rows: list[Row] = []
     cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: _score_into(d, pipeline.cfar_predictions(root), root))
-    rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_json(cfar_dir / "metrics.json")]))
+    rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_metrics(cfar_dir / "metrics.json")]))
 
     with pipeline.ScoringScenes(root) as test_scenes:
         for model_name in config.models:
@@ -154,7 +154,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                         lambda d, s=seed, p=pretrained, m=model_name: _train_and_score(
                             d, root, config, split, auto_dir, masks_dir, m, p, s, options.device, run.path, test_scenes),
                     )
-                    row.seed_metrics.append(read_json(seed_dir / "metrics.json"))
+                    row.seed_metrics.append(read_metrics(seed_dir / "metrics.json"))
                 _copy_first_seed(run.path / "rows" / key)
                 rows.append(row)
 

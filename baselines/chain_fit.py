@@ -40,7 +40,7 @@ from zendar_dataset.detection import (
     to_frame,
 )
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval import evaluate
+from zendar_dataset.eval import evaluate_record
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import open_dataset
 
@@ -132,7 +132,7 @@ def chain_ap(frames: LabelledFrames, params: ChainParams) -> dict[str, float | N
     """AP per band of the chain's detections on the frames, under the official evaluator."""
     results = {fid: frame_detections(points.retested(params.sar), params) for fid, points in frames.points.items()}
     truth = {fid: [{"x": float(x), "y": float(y)} for x, y in labels] for fid, labels in frames.labels.items()}
-    return evaluate({"meta": {"method": "chain_fit"}, "results": results}, {"frames": truth})["ap"]
+    return dict(evaluate_record({"meta": {"method": "chain_fit"}, "results": results}, {"frames": truth}).ap)
 
 
 def point_separation(frames: LabelledFrames) -> dict[str, float | None]:

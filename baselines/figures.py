@@ -7,6 +7,7 @@ matplotlib on the Agg canvas (no display needed); files are written atomically.
 from __future__ import annotations
 
 import io
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
 from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.eval.records import MetricsRecord, as_metrics_record
 from zendar_dataset.atomic_files import write_bytes_atomic
 
 _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
@@ -28,13 +30,14 @@ def _save_png(figure: Figure, path: Path) -> Path:
     return path
 
 
-def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) -> Figure:
+def pr_comparison_figure(curves: list[tuple[str, MetricsRecord | Mapping[str, Any]]], band: str) -> Figure:
     """Precision envelopes of several methods in one band.
 
     Parameters
     ----------
     curves
-        ``(label, metrics)`` per method, ``metrics`` as returned by ``zendar_dataset.eval.evaluate``.
+        ``(label, metrics)`` per method, ``metrics`` as returned by ``zendar_dataset.eval.evaluate_record``
+        (or ``evaluate``).
     band
         A key of ``BANDS_M``.
     """
@@ -43,13 +46,14 @@ def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) ->
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     for index, (label, metrics) in enumerate(curves):
-        curve, ap = metrics["pr_curves"][band], metrics["ap"][band]
+        record = as_metrics_record(metrics)
+        curve, ap = record.pr_curves[band], record.ap[band]
         text = f"{label} (AP n/a)" if ap is None else f"{label} (AP {100 * ap:.1f})"
-        if not curve["recall"]:
+        if not curve.recall:
             axes.plot([], [], label=text + ", no detections")
             continue
-        recall = [0.0] + curve["recall"]
-        envelope = curve["precision_envelope"][:1] + curve["precision_envelope"]
+        recall = [0.0, *curve.recall]
+        envelope = [*curve.precision_envelope[:1], *curve.precision_envelope]
         axes.step(recall, envelope, where="pre", label=text, marker=_MARKERS[index % len(_MARKERS)],
                   markevery=max(1, len(recall) // 8), markersize=4)
     axes.set_xlim(0.0, 1.0)
@@ -62,7 +66,7 @@ def pr_comparison_figure(curves: list[tuple[str, dict[str, Any]]], band: str) ->
     return figure
 
 
-def write_pr_comparisons(curves: list[tuple[str, dict[str, Any]]], out_dir: Path) -> list[Path]:
+def write_pr_comparisons(curves: list[tuple[str, MetricsRecord | Mapping[str, Any]]], out_dir: Path) -> list[Path]:
     """``out_dir/pr_<band>.png`` for every band (see :func:`pr_comparison_figure`)."""
     return [_save_png(pr_comparison_figure(curves, band), out_dir / f"pr_{band}.png") for band in BANDS_M]
 

@@ -9,11 +9,16 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-BANDS = ("near", "mid", "far", "all")
-TABLE_BANDS = ("near", "mid", "far")
+from zendar_dataset.eval.protocol import BAND_NAMES, RANGE_BANDS
+from zendar_dataset.eval.records import MetricsRecord
+
+#: Our columns: every band of the evaluator. The paper's columns: the bands ``all`` spans.
+BANDS = BAND_NAMES
+TABLE_BANDS = RANGE_BANDS
 
 #: Paper Table 1 (AP in percent on the recorded test set): (method, unsupervised, supervised) -> near, mid, far.
 PAPER_AP_PERCENT: dict[tuple[str, bool, bool], tuple[float, float, float]] = {
@@ -47,23 +52,23 @@ class Row:
         As the paper writes it (:data:`METHOD_NAMES`).
     unsupervised, supervised : bool
         Trained on automatic labels / on manual labels.
-    seed_metrics : list of dict
-        The evaluator's metrics (``zendar_dataset.eval.evaluate``) of each seed, in seed order.
+    seed_metrics : list of MetricsRecord
+        The evaluator's metrics (``zendar_dataset.eval.evaluate_record``) of each seed, in seed order.
     """
 
     key: str
     method: str
     unsupervised: bool
     supervised: bool
-    seed_metrics: list[dict[str, Any]] = field(default_factory=list)
+    seed_metrics: list[MetricsRecord] = field(default_factory=list)
 
     def ap_mean(self) -> dict[str, float | None]:
         """Mean AP per band over the seeds (None where a band has no ground truth)."""
-        return {band: _mean([m["ap"][band] for m in self.seed_metrics]) for band in BANDS}
+        return {band: _mean([m.ap[band] for m in self.seed_metrics]) for band in BANDS}
 
     def ap_std(self) -> dict[str, float | None]:
         """Sample standard deviation per band over the seeds (None for fewer than 2 seeds)."""
-        return {band: _std([m["ap"][band] for m in self.seed_metrics]) for band in BANDS}
+        return {band: _std([m.ap[band] for m in self.seed_metrics]) for band in BANDS}
 
     def paper_ap(self) -> dict[str, float] | None:
         """The paper's AP for this row as fractions, or None for a row the paper does not have."""
@@ -82,13 +87,14 @@ class Row:
         }
         if len(self.seed_metrics) > 1:
             entry["ap_std"] = _rounded(self.ap_std())
-            entry["ap_per_seed"] = [_rounded(m["ap"]) for m in self.seed_metrics]
-        intervals = [m.get("bootstrap") for m in self.seed_metrics]
+            entry["ap_per_seed"] = [_rounded(m.ap) for m in self.seed_metrics]
+        intervals = [m.bootstrap for m in self.seed_metrics]
         if intervals and all(intervals):
             entry["ap_ci95_per_seed"] = [
-                {band: [_round(ci[band]["low"]), _round(ci[band]["high"])] for band in BANDS} for ci in intervals
+                {band: [_round(ci[band].low), _round(ci[band].high)] for band in BANDS} for ci in intervals
             ]
-        entry["counts"] = self.seed_metrics[0]["counts"] if self.seed_metrics else None
+        first = self.seed_metrics[0] if self.seed_metrics else None
+        entry["counts"] = None if first is None else {band: first.counts[band].to_json() for band in BANDS}
         entry["paper_ap"] = self.paper_ap()
         entry["metrics"] = f"rows/{self.key}/metrics.json"
         entry["predictions"] = f"rows/{self.key}/predictions.json"
@@ -111,7 +117,7 @@ def _round(value: float | None) -> float | None:
     return None if value is None else round(float(value), 4)
 
 
-def _rounded(by_band: dict[str, float | None]) -> dict[str, float | None]:
+def _rounded(by_band: Mapping[str, float | None]) -> dict[str, float | None]:
     return {band: _round(by_band[band]) for band in BANDS}
 
 
@@ -127,11 +133,12 @@ def _mark(flag: bool) -> str:
 
 def markdown_table(rows: list[Row], title: str) -> str:
     """Table 1 as Markdown: ours (mean ± std over seeds, percent) beside the paper's figures."""
+    figures = [f"AP {band}" for band in BANDS] + [f"paper {band}" for band in TABLE_BANDS]
     lines = [
         f"### {title}",
         "",
-        "| method | unsupervised | supervised | AP near | AP mid | AP far | AP all | paper near | paper mid | paper far |",
-        "|---|:-:|:-:|--:|--:|--:|--:|--:|--:|--:|",
+        "| method | unsupervised | supervised | " + " | ".join(figures) + " |",
+        "|---|:-:|:-:|" + "--:|" * len(figures),
     ]
     for row in rows:
         mean, std = row.ap_mean(), row.ap_std()
@@ -200,6 +207,6 @@ def claims(rows: list[Row]) -> dict[str, dict[str, Any]]:
     ])
     out["ap_falls_with_range"] = verdict([
         (f"{row.method}{' pretrained' if row.unsupervised else ''}: {a} vs {b}", row.ap_mean()[a], row.ap_mean()[b])
-        for row in rows for a, b in (("near", "mid"), ("mid", "far"))
+        for row in rows for a, b in zip(TABLE_BANDS, TABLE_BANDS[1:])
     ])
     return out

@@ -15,7 +15,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval import evaluate
+from zendar_dataset.eval import evaluate_record
+from zendar_dataset.eval.protocol import BAND_NAMES
+from zendar_dataset.eval.report import read_metrics
 
 from zendar_baselines.configs import BenchConfig, Schedule
 from zendar_baselines.run_directory import RUN_MARKER, read_json
@@ -25,7 +27,7 @@ if TYPE_CHECKING:
 
 #: Largest |AP difference| per band (fraction) for a row to count as reproduced.
 AP_TOLERANCE = 0.01
-BANDS = ("near", "mid", "far", "all")
+BANDS = BAND_NAMES
 
 
 @dataclass(frozen=True)
@@ -83,13 +85,13 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
         raise ZendarError(f"{out / 'rows' / key}: no seed directories to re-score")
     all_reproduced = True
     for seed_dir in seed_dirs:
-        recorded = read_json(seed_dir / "metrics.json")["ap"]
+        recorded = read_metrics(seed_dir / "metrics.json").ap
         if key == "cfar":
             predictions = pipeline.cfar_predictions(root)
         else:
             predictions = pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), device,
                                                    scenes=test_scenes)
-        again = evaluate(predictions, str(root), split="test")["ap"]
+        again = evaluate_record(predictions, str(root), split="test").ap
         worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
                     default=0.0)
         same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)

@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from tests.eval.eval_reference import reference_score, reference_tables  # noqa: E402
 
-from zendar_dataset.eval import evaluate  # noqa: E402
+from zendar_dataset.eval import ALL_BAND, BAND_NAMES, evaluate, evaluate_record  # noqa: E402
 from zendar_dataset.eval.evaluate import score_tables  # noqa: E402
 from zendar_dataset.eval.validation import read_ground_truth_document, read_predictions  # noqa: E402
 
@@ -107,7 +107,7 @@ def plain_loop_rows(ground_truth: dict, predictions: dict, repeats: int, workdir
         for b in expected["ap"]
     ) and expected["counts"] == metrics["counts"]
     print(f"plain loop and package agree (AP to 1e-9, counts per band): {agree}")
-    print("AP [%] near/mid/far/all: " + " / ".join(f"{100 * metrics['ap'][b]:.2f}" for b in metrics["ap"]))
+    print(f"AP [%] {'/'.join(BAND_NAMES)}: " + " / ".join(f"{100 * metrics['ap'][b]:.2f}" for b in BAND_NAMES))
 
     pred_path, gt_path = workdir / "pred.json", workdir / "gt.json"
     pred_path.write_bytes(orjson.dumps(predictions))
@@ -229,9 +229,9 @@ def nuscenes_rows(n_frames: int, per_frame: int, repeats: int, workdir: Path) ->
     finally:
         algo.np = np
     tp, fp = (int(sum(flags)) for flags in recording.cumsum_inputs[:2])
-    counts = evaluate(predictions, ground_truth)["counts"]["all"]
-    print(f"nuScenes devkit: {n_pred:,} predictions, {counts['gt']:,} ground truths; TP/FP devkit {tp:,}/{fp:,}, "
-          f"package {counts['tp']:,}/{counts['fp']:,}: identical {(tp, fp) == (counts['tp'], counts['fp'])}")
+    counts = evaluate_record(predictions, ground_truth).counts[ALL_BAND]
+    print(f"nuScenes devkit: {n_pred:,} predictions, {counts.gt:,} ground truths; TP/FP devkit {tp:,}/{fp:,}, "
+          f"package {counts.tp:,}/{counts.fp:,}: identical {(tp, fp) == (counts.tp, counts.fp)}")
 
     gt_boxes, pred_boxes = namespace["boxes"](gt_frames, False), namespace["boxes"](pred_frames, True)
     t = interleaved(

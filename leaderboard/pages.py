@@ -22,7 +22,7 @@ from typing import Any
 import jinja2
 from markupsafe import Markup
 
-from zendar_dataset.eval.protocol import BANDS_M, MATCH_DISTANCE_M
+from zendar_dataset.eval.protocol import ALL_BAND, BANDS_M, MATCH_DISTANCE_M
 from zendar_leaderboard.scoring import BANDS, format_ap_percent
 
 TITLE = "Zendar radar benchmark: moving-car detection"
@@ -55,7 +55,7 @@ _templates = jinja2.Environment(
 )
 _templates.filters["percent"] = format_ap_percent
 _templates.globals.update(
-    site_title=TITLE, bands=BANDS, band_ranges_m=BANDS_M, match_distance_m=MATCH_DISTANCE_M,
+    site_title=TITLE, bands=BANDS, all_band=ALL_BAND, band_ranges_m=BANDS_M, match_distance_m=MATCH_DISTANCE_M,
     sensor_labels=SENSOR_TAGS, zip=zip,
 )
 

@@ -17,6 +17,7 @@ import io
 import time
 from typing import Any
 
+from zendar_dataset.eval.protocol import ALL_BAND
 from zendar_leaderboard.scoring import BANDS
 from zendar_leaderboard.store import ScoreRow, Store, SubmissionRow
 
@@ -88,7 +89,7 @@ def _rank_key(entry: dict, band: str) -> tuple:
     return (ap is None, -(ap or 0.0), entry["submitted_at"], entry["id"])
 
 
-def ranked(entries: list[dict], band: str = "all") -> list[dict]:
+def ranked(entries: list[dict], band: str = ALL_BAND) -> list[dict]:
     """Entries sorted by ``band`` (descending AP), each with its ``rank`` (equal AP, equal rank)."""
     ordered = sorted(entries, key=lambda e: _rank_key(e, band))
     previous = object()
@@ -101,7 +102,7 @@ def ranked(entries: list[dict], band: str = "all") -> list[dict]:
     return [{"rank": e.pop("rank"), **e} for e in ordered]
 
 
-def leaderboard(store: Store, band: str = "all") -> dict[str, Any]:
+def leaderboard(store: Store, band: str = ALL_BAND) -> dict[str, Any]:
     """The whole ranking, sorted by ``band``: ``{"entries": [...], "round": {...}, "sorted_by",
     "generated_at"}``.
 

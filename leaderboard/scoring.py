@@ -13,13 +13,15 @@ from typing import Any
 
 import numpy as np
 
-from zendar_dataset.eval import evaluate
+from zendar_dataset.eval import evaluate_record
 from zendar_dataset.eval.evaluate import scene_of
-from zendar_dataset.eval.protocol import PROTOCOL_NAME, PROTOCOL_VERSION, protocol_dict
+from zendar_dataset.eval.protocol import BAND_NAMES, PROTOCOL_NAME, PROTOCOL_VERSION, protocol_dict
+from zendar_dataset.eval.records import PRCurve
 from zendar_leaderboard.ground_truth import PARTS, TestSplit
 
 MAX_CURVE_POINTS = 50
-BANDS = ("near", "mid", "far", "all")
+#: The bands every leaderboard score, page and table lists: the evaluator's.
+BANDS = BAND_NAMES
 
 
 def shown_ap(ap: float | None) -> float | None:
@@ -49,12 +51,13 @@ def format_ap_percent(ap: float | None, missing: str = "–") -> str:
     return missing if ap is None else f"{100.0 * ap:.1f}"
 
 
-def _thin_curve(curve: dict[str, list[float]]) -> dict[str, list[float]]:
-    n = len(curve["recall"])
+def _thin_curve(curve: PRCurve) -> dict[str, list[float]]:
+    n = len(curve.recall)
     keep = range(n) if n <= MAX_CURVE_POINTS else np.unique(np.linspace(0, n - 1, MAX_CURVE_POINTS).round().astype(int))
     return {
-        key: [round(curve[key][i], 3) for i in keep]
-        for key in ("recall", "precision", "precision_envelope")
+        "recall": [round(curve.recall[i], 3) for i in keep],
+        "precision": [round(curve.precision[i], 3) for i in keep],
+        "precision_envelope": [round(curve.precision_envelope[i], 3) for i in keep],
     }
 
 
@@ -85,20 +88,20 @@ def score_part(document: dict, test_split: TestSplit, part: str, *, bootstrap: i
     results = document["results"]
     predictions = {"meta": {}, "results": {f: results[f] for f in frame_ids}}
     n_scenes = len({scene_of(f) for f in frame_ids})
-    metrics = evaluate(
+    metrics = evaluate_record(
         predictions, test_split.part_ground_truth(part), bootstrap=bootstrap if n_scenes >= 2 else 0, seed=seed
     )
     ci = None
-    if "bootstrap" in metrics:
+    if metrics.bootstrap is not None:
         ci = {
-            band: None if metrics["bootstrap"][band]["low"] is None
-            else [shown_ap(metrics["bootstrap"][band]["low"]), shown_ap(metrics["bootstrap"][band]["high"])]
+            band: None if metrics.bootstrap[band].low is None
+            else [shown_ap(metrics.bootstrap[band].low), shown_ap(metrics.bootstrap[band].high)]
             for band in BANDS
         }
     return {
-        "ap": {band: shown_ap(metrics["ap"][band]) for band in BANDS},
+        "ap": {band: shown_ap(metrics.ap[band]) for band in BANDS},
         "ci": ci,
-        "pr_curves": {band: _thin_curve(metrics["pr_curves"][band]) for band in BANDS},
+        "pr_curves": {band: _thin_curve(metrics.pr_curves[band]) for band in BANDS},
         "n_frames": len(frame_ids),
     }
 

@@ -15,6 +15,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
+from zendar_dataset.eval.protocol import ALL_BAND
 from zendar_leaderboard import ranking
 from zendar_leaderboard.ground_truth import TestSplit
 from zendar_leaderboard.pages import ranking_page
@@ -111,8 +112,8 @@ class Handler(BaseHTTPRequestHandler):
     @property
     def band(self) -> str:
         """The band the ranking is sorted by: ``?sort=BAND``, ``all`` unless a known band."""
-        sort = parse_qs(urlsplit(self.path).query).get("sort", ["all"])[0]
-        return sort if sort in BANDS else "all"
+        sort = parse_qs(urlsplit(self.path).query).get("sort", [ALL_BAND])[0]
+        return sort if sort in BANDS else ALL_BAND
 
     def log_message(self, format: str, *args: Any) -> None:
         log.info("%s %s", self.address_string(), format % args)

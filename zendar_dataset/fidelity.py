@@ -38,8 +38,8 @@ from zendar_dataset.detection.classical import cluster_cars, radar_points
 from zendar_dataset.detection.scene import latest_cube
 from zendar_dataset.detection.static_scene import SarTestParams, sar_db_at
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval import evaluate
-from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.eval import evaluate_record
+from zendar_dataset.eval.protocol import ALL_BAND, BANDS_M, RANGE_BANDS
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import SceneReader, open_dataset
 from zendar_dataset.geometry.frames import ego_T_sensor
@@ -51,7 +51,6 @@ from zendar_dataset.sim.profiles import PROFILES
 from zendar_dataset.sim.scene import build_scene
 from zendar_dataset.sim.rotate import unrotate
 
-BANDS = ("near", "mid", "far")
 SIMULATION_JSON = "simulation.json"
 _SCENE_INDEX = re.compile(r"^scene-(\d+)$")
 
@@ -59,7 +58,7 @@ _SCENE_INDEX = re.compile(r"^scene-(\d+)$")
 def _band(r_m: np.ndarray) -> np.ndarray:
     """Band name per range (``""`` beyond 60 m)."""
     out = np.full(np.shape(r_m), "", dtype=object)
-    for name in BANDS:
+    for name in RANGE_BANDS:
         low, high = BANDS_M[name]
         out[(r_m >= low) & (r_m < high)] = name
     return out
@@ -69,15 +68,15 @@ def _band(r_m: np.ndarray) -> np.ndarray:
 class _Tally:
     """Everything counted over the frames, turned into the report at the end."""
 
-    labels: dict[str, int] = field(default_factory=lambda: dict.fromkeys((*BANDS, "beyond"), 0))
+    labels: dict[str, int] = field(default_factory=lambda: dict.fromkeys((*RANGE_BANDS, "beyond"), 0))
     labels_in_fov: int = 0
     labels_with_fov_known: int = 0
     labels_behind_ego: int = 0
     annotatable: int = 0
     annotatable_unlabelled: int = 0
-    sar_covered: dict[str, int] = field(default_factory=lambda: dict.fromkeys(BANDS, 0))
-    sar_checked: dict[str, int] = field(default_factory=lambda: dict.fromkeys(BANDS, 0))
-    detected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(BANDS, 0))
+    sar_covered: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RANGE_BANDS, 0))
+    sar_checked: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RANGE_BANDS, 0))
+    detected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(RANGE_BANDS, 0))
     band: list = field(default_factory=list)  # per CFAR detection
     on_car: list = field(default_factory=list)
     sar_db: list = field(default_factory=list)
@@ -147,7 +146,7 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
         x, y = labels["x"][rows], labels["y"][rows]
         r = np.hypot(x, y)
         bands = _band(r)
-        for b in BANDS:
+        for b in RANGE_BANDS:
             tally.labels[b] += int(np.count_nonzero(bands == b))
         tally.labels["beyond"] += int(np.count_nonzero(bands == ""))
         tally.labels_behind_ego += int(np.count_nonzero(x <= 0.0))
@@ -167,7 +166,7 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
             frame = sar.frame_index(sensor, stamp)
             if frame is not None and rows.size:
                 covered |= sar.pixels(sensor, frame, centers_ecef)[1]
-        for b in BANDS:
+        for b in RANGE_BANDS:
             tally.sar_checked[b] += int(np.count_nonzero(bands == b))
             tally.sar_covered[b] += int(np.count_nonzero(covered & (bands == b)))
         # Moving cars' boxes in the ego frame at this frame: truth where known, else the labels.
@@ -219,7 +218,7 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
             tally.doppler_mps.extend(np.abs(found.residual_mps).tolist())
             frame_points.append(points[found.moving])
             frame_snr.append(found.snr[found.moving])
-        for b in BANDS:
+        for b in RANGE_BANDS:
             tally.detected[b] += int(np.count_nonzero(label_hit & (bands == b)))
         fid = frame_id(reader.scene_id, stamp)
         tally.predictions[fid] = cluster_cars(np.concatenate(frame_points) if frame_points else np.zeros((0, 3)),
@@ -279,8 +278,8 @@ def fidelity_report(
     detections: dict[str, Any] = {}
     auc_sar: dict[str, float | None] = {}
     auc_doppler: dict[str, float | None] = {}
-    for b in (*BANDS, "all"):
-        sel = band != "" if b == "all" else band == b
+    for b in (*RANGE_BANDS, ALL_BAND):
+        sel = band != "" if b == ALL_BAND else band == b
         detections[b] = {
             "on_moving_cars": int(np.count_nonzero(on_car & sel)),
             "static": int(np.count_nonzero(~on_car & sel)),
@@ -289,16 +288,16 @@ def fidelity_report(
         # Darker SAR (lower dB) and larger Doppler residuals say "moving": scores increase with that.
         auc_sar[b] = _auc(on_car[sel], -sar_db[sel])
         auc_doppler[b] = _auc(on_car[sel], doppler[sel])
-    metrics = evaluate({"meta": {"method": "classical_detector (fidelity report)"}, "results": tally.predictions},
-                       {"frames": tally.ground_truth})
-    n_labels = sum(tally.labels[b] for b in BANDS)
+    metrics = evaluate_record({"meta": {"method": "classical_detector (fidelity report)"}, "results": tally.predictions},
+                              {"frames": tally.ground_truth})
+    n_labels = sum(tally.labels[b] for b in RANGE_BANDS)
     return {
         "root": str(root),
         "split": split,
         "scenes": len(scene_ids),
         "frames": tally.frames,
         "truth": truth_of is not None,
-        "bands_m": {b: list(BANDS_M[b]) for b in BANDS},
+        "bands_m": {b: list(BANDS_M[b]) for b in RANGE_BANDS},
         "labels_per_band": dict(tally.labels),
         "labels_in_radar_fov": {
             "in_view": tally.labels_in_fov, "labels": tally.labels_with_fov_known,
@@ -308,16 +307,16 @@ def fidelity_report(
         "visible_moving_cars": tally.annotatable if truth_of else None,
         "visible_moving_cars_without_label": tally.annotatable_unlabelled if truth_of else None,
         "sar_coverage_within_60m": {
-            **{b: _share(tally.sar_covered[b], tally.sar_checked[b]) for b in BANDS},
-            "all": _share(sum(tally.sar_covered.values()), sum(tally.sar_checked.values())),
+            **{b: _share(tally.sar_covered[b], tally.sar_checked[b]) for b in RANGE_BANDS},
+            ALL_BAND: _share(sum(tally.sar_covered.values()), sum(tally.sar_checked.values())),
         },
         "cfar_detection_rate": {
-            **{b: _share(tally.detected[b], tally.sar_checked[b]) for b in BANDS},
-            "all": _share(sum(tally.detected.values()), n_labels),
+            **{b: _share(tally.detected[b], tally.sar_checked[b]) for b in RANGE_BANDS},
+            ALL_BAND: _share(sum(tally.detected.values()), n_labels),
         },
         "cfar_detections": detections,
         "moving_vs_static_auc": {"sar_mask": auc_sar, "doppler": auc_doppler},
-        "end_to_end_ap": metrics["ap"],
+        "end_to_end_ap": dict(metrics.ap),
     }
 
 
@@ -340,10 +339,10 @@ def format_report(report: dict[str, Any]) -> str:
     if report["truth"]:
         lines.append(f"visible moving cars without a label: {report['visible_moving_cars_without_label']} "
                      f"(of {report['visible_moving_cars']} visible)")
-    lines.append(f"{'':28s}{'near':>8s}{'mid':>8s}{'far':>8s}{'all':>8s}")
+    lines.append(f"{'':28s}" + "".join(f"{b:>8s}" for b in (*RANGE_BANDS, ALL_BAND)))
     labels = report["labels_per_band"]
-    lines.append(f"{'labels':28s}{labels['near']:8d}{labels['mid']:8d}{labels['far']:8d}{sum(labels[b] for b in BANDS):8d}"
-                 f"   (+{labels['beyond']} beyond 60 m)")
+    lines.append(f"{'labels':28s}" + "".join(f"{labels[b]:8d}" for b in RANGE_BANDS)
+                 + f"{sum(labels[b] for b in RANGE_BANDS):8d}   (+{labels['beyond']} beyond 60 m)")
     rows = [
         ("SAR coverage of labels", report["sar_coverage_within_60m"], pct),
         ("CFAR detection rate", report["cfar_detection_rate"], pct),
@@ -352,8 +351,8 @@ def format_report(report: dict[str, Any]) -> str:
         ("AP end-to-end detector", report["end_to_end_ap"], num),
     ]
     for name, values, fmt in rows:
-        lines.append(f"{name:28s}" + "".join(f"{fmt(values.get(b)):>8s}" for b in (*BANDS, "all")))
+        lines.append(f"{name:28s}" + "".join(f"{fmt(values.get(b)):>8s}" for b in (*RANGE_BANDS, ALL_BAND)))
     det = report["cfar_detections"]
-    lines.append(f"{'CFAR detections on moving cars':28s}" + "".join(f"{det[b]['on_moving_cars']:8d}" for b in (*BANDS, "all")))
-    lines.append(f"{'CFAR detections, static':28s}" + "".join(f"{det[b]['static']:8d}" for b in (*BANDS, "all")))
+    lines.append(f"{'CFAR detections on moving cars':28s}" + "".join(f"{det[b]['on_moving_cars']:8d}" for b in (*RANGE_BANDS, ALL_BAND)))
+    lines.append(f"{'CFAR detections, static':28s}" + "".join(f"{det[b]['static']:8d}" for b in (*RANGE_BANDS, ALL_BAND)))
     return "\n".join(lines)

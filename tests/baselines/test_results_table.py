@@ -10,12 +10,17 @@ import numpy as np
 
 from zendar_baselines.figures import bev_figure, pr_comparison_figure
 from zendar_baselines.results_table import Row, claims, csv_table, markdown_table
+from zendar_dataset.eval import MetricsRecord
 
 
 def _metrics(near, mid, far, all_=None):
     ap = {"near": near, "mid": mid, "far": far, "all": all_ if all_ is not None else near}
     curve = {"recall": [0.5, 1.0], "precision": [1.0, 0.5], "precision_envelope": [1.0, 0.5], "score": [2.0, 1.0]}
-    return {"ap": ap, "counts": {}, "pr_curves": {b: curve for b in ap}}
+    return MetricsRecord.from_json({
+        "ap": ap, "counts": {b: {"gt": 2, "tp": 2, "fp": 1} for b in ap}, "pr_curves": {b: curve for b in ap},
+        "protocol": {}, "partial": False, "n_frames": 1, "n_frames_ground_truth": 1, "n_scenes": 1,
+        "n_predictions": 3, "meta": {},
+    })
 
 
 def _rows():

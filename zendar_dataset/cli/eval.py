@@ -11,15 +11,15 @@ import argparse
 import sys
 
 from zendar_dataset.cli.common import run_cli, writing
-from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES
+from zendar_dataset.eval.protocol import BANDS_M, DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES, MATCH_DISTANCE_M
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="zendar-eval",
         description=(
-            "Score moving-car detections: center distance < 2.5 m, AP per range band "
-            "(near [0, 15) m, mid [15, 30) m, far [30, 60) m, all [0, 60) m). "
+            f"Score moving-car detections: center distance < {MATCH_DISTANCE_M:g} m, AP per range band "
+            f"({', '.join(f'{band} [{low_m:g}, {high_m:g}) m' for band, (low_m, high_m) in BANDS_M.items())}). "
             "Every problem in the input is listed at once; exit status 2 when there are any."
         ),
     )
@@ -76,7 +76,7 @@ def _refuse_output_into_inputs(args: argparse.Namespace) -> None:
 def _run(args: argparse.Namespace) -> int:
     # Imported here so that --help stays fast (numba, matplotlib).
     from zendar_dataset.errors import PredictionsError
-    from zendar_dataset.eval.evaluate import evaluate
+    from zendar_dataset.eval.evaluate import evaluate_record
     from zendar_dataset.atomic_files import prepare_out_dir
     from zendar_dataset.eval.report import format_table, write_metrics, write_problems
 
@@ -85,7 +85,7 @@ def _run(args: argparse.Namespace) -> int:
         with writing(args.out):
             prepare_out_dir(args.out)
     try:
-        metrics = evaluate(
+        metrics = evaluate_record(
             args.predictions,
             args.gt,
             partial=args.partial,

@@ -1,10 +1,12 @@
 """Score predictions against ground truth: validation, matching, banding, AP, bootstrap.
 
-The returned dict is exactly what ``zendar-eval`` writes to ``metrics.json``.
+:func:`evaluate_record` returns the typed :class:`~zendar_dataset.eval.records.MetricsRecord`;
+:func:`evaluate` returns its ``to_json()``, exactly what ``zendar-eval`` writes to ``metrics.json``.
 """
 
 from __future__ import annotations
 
+import copy
 import os
 from pathlib import Path
 from typing import Any
@@ -16,6 +18,7 @@ from zendar_dataset.eval.ap import PrecisionRecall, band_steps, curve_from_steps
 from zendar_dataset.eval.bootstrap import BandDetections, bootstrap_intervals
 from zendar_dataset.eval.matching import UNMATCHED, match_and_band
 from zendar_dataset.eval.protocol import (
+    BAND_NAMES,
     BANDS_M,
     DEFAULT_MAX_BYTES,
     MAX_BOOTSTRAP_RESAMPLES,
@@ -24,6 +27,7 @@ from zendar_dataset.eval.protocol import (
     protocol_dict,
     range_m,
 )
+from zendar_dataset.eval.records import BandCounts, BootstrapInterval, MetricsRecord, PRCurve
 from zendar_dataset.eval.validation import (
     GROUND_TRUTH_REQUIRED,
     CheckedInput,
@@ -95,17 +99,17 @@ def load_ground_truth(
     return checked
 
 
-def _curve_json(curve: PrecisionRecall) -> dict[str, list[float]]:
+def _curve_record(curve: PrecisionRecall) -> PRCurve:
     n = len(curve.score)
     keep = slice(None)
     if n > MAX_PR_CURVE_POINTS:
         keep = np.unique(np.linspace(0, n - 1, MAX_PR_CURVE_POINTS).round().astype(np.int64))
-    return {
-        "recall": curve.recall[keep].tolist(),
-        "precision": curve.precision[keep].tolist(),
-        "precision_envelope": curve.precision_envelope[keep].tolist(),
-        "score": curve.score[keep].tolist(),
-    }
+    return PRCurve(
+        recall=tuple(curve.recall[keep].tolist()),
+        precision=tuple(curve.precision[keep].tolist()),
+        precision_envelope=tuple(curve.precision_envelope[keep].tolist()),
+        score=tuple(curve.score[keep].tolist()),
+    )
 
 
 def scene_of(frame_id: str) -> str:
@@ -120,7 +124,9 @@ def score_tables(
     partial: bool = False,
     bootstrap: int = 0,
     seed: int = 0,
-) -> dict[str, Any]:
+    split: str | None = None,
+    meta: dict[str, Any] | None = None,
+) -> MetricsRecord:
     """Score validated tables (every prediction frame is a ground-truth frame).
 
     Parameters
@@ -134,12 +140,12 @@ def score_tables(
         Number of scene resamples for confidence intervals (0: none).
     seed
         Seed for the resampling.
+    split, meta
+        Recorded as they are: the ground truth's split, the predictions' ``meta`` (default ``{}``).
 
     Returns
     -------
-    dict
-        ``ap``, ``counts``, ``pr_curves``, ``protocol``, ``partial``, ``n_frames``,
-        ``n_frames_ground_truth``, ``n_scenes``, ``n_predictions`` and, when asked, ``bootstrap``.
+    MetricsRecord
     """
     if predictions.frame_ids == ground_truth.frame_ids:  # the usual case: files listed in one order
         pred_gt_frame = np.arange(len(ground_truth.frame_ids), dtype=np.int64)
@@ -152,9 +158,8 @@ def score_tables(
         gt_evaluated = evaluated_frame[ground_truth.frame_of_row]
     else:
         gt_evaluated = np.ones(len(ground_truth.x_m), dtype=bool)
-    band_names = list(BANDS_M)
-    band_low_m = np.array([BANDS_M[b][0] for b in band_names])
-    band_high_m = np.array([BANDS_M[b][1] for b in band_names])
+    band_low_m = np.array([BANDS_M[b][0] for b in BAND_NAMES])
+    band_high_m = np.array([BANDS_M[b][1] for b in BAND_NAMES])
     # A TP lives in its ground truth's band, an FP in its own: this is what keeps a correct
     # detection straddling a band edge from scoring one FP plus one miss.
     matched, band_bits = match_and_band(
@@ -172,29 +177,25 @@ def score_tables(
     is_tp = matched != UNMATCHED
     gt_range_m = range_m(ground_truth.x_m, ground_truth.y_m)
 
-    metrics: dict[str, Any] = {"ap": {}, "counts": {}, "pr_curves": {}}
+    ap_by_band: dict[str, float | None] = {}
+    counts: dict[str, BandCounts] = {}
+    pr_curves: dict[str, PRCurve] = {}
     gt_masks = {}
     # Per band, one step per distinct score with cumulative TP/FP counts (ties form one step).
-    steps = band_steps(predictions.score, is_tp, band_bits, len(band_names))
-    for band, (step_score, tp_cumulative, fp_cumulative) in zip(band_names, steps):
+    steps = band_steps(predictions.score, is_tp, band_bits, len(BAND_NAMES))
+    for band, (step_score, tp_cumulative, fp_cumulative) in zip(BAND_NAMES, steps):
         gt_in = in_band(gt_range_m, band) & gt_evaluated
         gt_masks[band] = gt_in
         n_gt = int(gt_in.sum())
-        ap, curve = curve_from_steps(step_score, tp_cumulative, fp_cumulative, n_gt)
-        metrics["ap"][band] = ap
+        ap_by_band[band], curve = curve_from_steps(step_score, tp_cumulative, fp_cumulative, n_gt)
         n_tp = int(tp_cumulative[-1]) if len(tp_cumulative) else 0
         n_fp = int(fp_cumulative[-1]) if len(fp_cumulative) else 0
-        metrics["counts"][band] = {"gt": n_gt, "tp": n_tp, "fp": n_fp}
-        metrics["pr_curves"][band] = _curve_json(curve)
+        counts[band] = BandCounts(gt=n_gt, tp=n_tp, fp=n_fp)
+        pr_curves[band] = _curve_record(curve)
 
     evaluated_ids = predictions.frame_ids if partial else ground_truth.frame_ids
     scenes = sorted({frame_id.rpartition("/")[0] for frame_id in evaluated_ids})
-    metrics["protocol"] = protocol_dict()
-    metrics["partial"] = bool(partial)
-    metrics["n_frames"] = len(predictions.frame_ids) if partial else len(ground_truth.frame_ids)
-    metrics["n_frames_ground_truth"] = len(ground_truth.frame_ids)
-    metrics["n_scenes"] = len(scenes)
-    metrics["n_predictions"] = len(predictions.score)
+    intervals = None
     if bootstrap:
         scene_index = {name: k for k, name in enumerate(scenes)}
         gt_frame_scene = np.array(
@@ -203,13 +204,29 @@ def score_tables(
         gt_scene = gt_frame_scene[ground_truth.frame_of_row]
         pred_scene = np.repeat(gt_frame_scene[pred_gt_frame], predictions.counts)
         bands = {}
-        for b, band in enumerate(band_names):
+        for b, band in enumerate(BAND_NAMES):
             d_in = (band_bits >> b) & 1 == 1
             bands[band] = BandDetections(
                 predictions.score[d_in], is_tp[d_in], pred_scene[d_in], gt_scene[gt_masks[band]]
             )
-        metrics["bootstrap"] = bootstrap_intervals(bands, len(scenes), bootstrap, seed)
-    return metrics
+        intervals = {
+            band: BootstrapInterval(**interval)
+            for band, interval in bootstrap_intervals(bands, len(scenes), bootstrap, seed).items()
+        }
+    return MetricsRecord(
+        ap=ap_by_band,
+        counts=counts,
+        protocol=protocol_dict(),
+        partial=bool(partial),
+        n_frames=len(predictions.frame_ids) if partial else len(ground_truth.frame_ids),
+        n_frames_ground_truth=len(ground_truth.frame_ids),
+        n_scenes=len(scenes),
+        n_predictions=len(predictions.score),
+        meta={} if meta is None else copy.deepcopy(meta),
+        pr_curves=pr_curves,
+        bootstrap=intervals,
+        split=split,
+    )
 
 
 def _count_argument(name: str, value: Any, low: int, high: int | None) -> int:
@@ -220,6 +237,54 @@ def _count_argument(name: str, value: Any, low: int, high: int | None) -> int:
         bounds = f"between {low:,} and {high:,}" if high is not None else f"{low} or more"
         raise ZendarError(f"{name} must be {bounds}, got {value}")
     return int(value)
+
+
+def evaluate_record(
+    predictions: Any,
+    ground_truth: Any,
+    *,
+    partial: bool = False,
+    bootstrap: int = 0,
+    seed: int = 0,
+    split: str | None = None,
+    max_bytes: int = DEFAULT_MAX_BYTES,
+) -> MetricsRecord:
+    """Score a predictions file against ground truth under the official protocol, as a typed record.
+
+    Takes the arguments of :func:`evaluate` and raises the same errors; ``to_json()`` of the
+    result is what :func:`evaluate` returns.
+
+    Returns
+    -------
+    MetricsRecord
+
+    Examples
+    --------
+    >>> gt = {"frames": {"s/1": [{"x": 10.0, "y": 0.0}]}}
+    >>> preds = {"meta": {"method": "demo"}, "results": {"s/1": [{"x": 11.0, "y": 0.0, "score": 0.9}]}}
+    >>> record = evaluate_record(preds, gt)
+    >>> record.ap["near"], record.counts["near"]
+    (1.0, BandCounts(gt=1, tp=1, fp=0))
+    """
+    bootstrap = _count_argument("bootstrap", bootstrap, 0, MAX_BOOTSTRAP_RESAMPLES)
+    seed = _count_argument("seed", seed, 0, None)
+    max_bytes = _count_argument("max_bytes", max_bytes, 1, None)
+    pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
+    pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
+    gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)
+    problems += pred.problems + gt.problems
+    if pred.frame_ids is not None and gt.frame_ids is not None:
+        problems += frame_set_problems(pred.frame_ids, gt.frame_ids, partial=partial)
+    if problems:
+        noun = "problem" if len(problems) == 1 else "problems"
+        raise PredictionsError(
+            f"{len(problems)} {noun} in the evaluator's input, nothing was scored:\n  "
+            + "\n  ".join(problems),
+            problems,
+        )
+    return score_tables(
+        pred.table, gt.table, partial=partial, bootstrap=bootstrap, seed=seed, split=gt.split, meta=pred.meta
+    )
 
 
 def evaluate(
@@ -257,7 +322,8 @@ def evaluate(
     dict
         The ``metrics.json`` structure: ``ap`` (band → value in [0, 1] or None), ``counts``
         (band → gt/tp/fp), ``pr_curves``, ``protocol``, ``partial``, ``n_frames``, ``split`` when
-        known, ``bootstrap`` when asked, and ``meta`` from the predictions.
+        known, ``bootstrap`` when asked, and ``meta`` from the predictions. It is
+        ``evaluate_record(...).to_json()``; :func:`evaluate_record` gives the typed record.
 
     Raises
     ------
@@ -273,24 +339,12 @@ def evaluate(
     >>> evaluate(preds, gt)["ap"]
     {'near': 1.0, 'mid': None, 'far': None, 'all': 1.0}
     """
-    bootstrap = _count_argument("bootstrap", bootstrap, 0, MAX_BOOTSTRAP_RESAMPLES)
-    seed = _count_argument("seed", seed, 0, None)
-    max_bytes = _count_argument("max_bytes", max_bytes, 1, None)
-    pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
-    pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
-    gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)
-    problems += pred.problems + gt.problems
-    if pred.frame_ids is not None and gt.frame_ids is not None:
-        problems += frame_set_problems(pred.frame_ids, gt.frame_ids, partial=partial)
-    if problems:
-        noun = "problem" if len(problems) == 1 else "problems"
-        raise PredictionsError(
-            f"{len(problems)} {noun} in the evaluator's input, nothing was scored:\n  "
-            + "\n  ".join(problems),
-            problems,
-        )
-    metrics = score_tables(pred.table, gt.table, partial=partial, bootstrap=bootstrap, seed=seed)
-    if gt.split is not None:
-        metrics["split"] = gt.split
-    metrics["meta"] = pred.meta
-    return metrics
+    return evaluate_record(
+        predictions,
+        ground_truth,
+        partial=partial,
+        bootstrap=bootstrap,
+        seed=seed,
+        split=split,
+        max_bytes=max_bytes,
+    ).to_json()

@@ -20,14 +20,24 @@ PROTOCOL_VERSION = "1.0"
 #: half the length of an average car).
 MATCH_DISTANCE_M = 2.5
 
+#: The name of the band that spans all the others.
+ALL_BAND = "all"
+
 #: Range bands, half-open ``[low, high)`` in metres of r = sqrt(x² + y²) in the ego frame
-#: (paper §4.3). ``all`` spans the three others; anything at r ≥ 60 m is in no band.
+#: (paper §4.3). ``all`` spans the three others; anything at r ≥ 60 m is in no band. This is the
+#: one place band names are written: everything else takes them from here.
 BANDS_M: dict[str, tuple[float, float]] = {
     "near": (0.0, 15.0),
     "mid": (15.0, 30.0),
     "far": (30.0, 60.0),
-    "all": (0.0, 60.0),
+    ALL_BAND: (0.0, 60.0),
 }
+
+#: Every band, in the order metrics list them (``ALL_BAND`` last).
+BAND_NAMES: tuple[str, ...] = tuple(BANDS_M)
+
+#: The bands ``ALL_BAND`` spans, nearest first (the paper's Table 1 columns).
+RANGE_BANDS: tuple[str, ...] = tuple(band for band in BANDS_M if band != ALL_BAND)
 
 MAX_DETECTIONS_PER_FRAME = 500
 
