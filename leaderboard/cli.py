@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from zendar_dataset.cli.common import run_cli
+from zendar_dataset.cli.interrupt import exit_while_starting
 from zendar_dataset.errors import ZendarError
 
 EXIT_ENVIRONMENT = 1
@@ -243,5 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(body)
 
 
+def zendar_leaderboard() -> int:
+    """Console script ``zendar-leaderboard``: Ctrl-C exits 130 from the start, imports included."""
+    exit_while_starting()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(zendar_leaderboard())

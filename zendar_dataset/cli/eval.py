@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-from zendar_dataset.cli.interrupt import exit_while_starting
-
-if __name__ == "__main__":  # python -m: Ctrl-C during the imports below exits 130 quietly
-    exit_while_starting()
-
 import argparse
 import sys
 
 from zendar_dataset.cli.common import run_cli, writing
-from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES
+from zendar_dataset.cli.interrupt import exit_while_starting
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # Imported here, not at the top, so that the console script's Ctrl-C handler is in place
+    # before the evaluator's imports (numpy, numba).
+    from zendar_dataset.eval.protocol import DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES
+
     parser = argparse.ArgumentParser(
         prog="zendar-eval",
         description=(
@@ -112,6 +111,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from zendar_dataset.eval.protocol import MAX_BOOTSTRAP_RESAMPLES
+
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.plot and args.out is None:
@@ -125,5 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(lambda: _run(args))
 
 
+def zendar_eval() -> int:
+    """Console script ``zendar-eval``: Ctrl-C exits 130 from the start, imports included."""
+    exit_while_starting()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(zendar_eval())
