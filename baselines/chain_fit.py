@@ -1,6 +1,7 @@
 """The detection chain's two measured numbers, fitted on a split's labels (the training split; never test).
 
-    python -m zendar_baselines.chain_fit ROOT [--split train] [--sweep]
+    zendar-bench fit-chain ROOT [--split train] [--sweep]
+    python -m zendar_baselines.chain_fit ROOT [--split train] [--sweep]   (the same)
 
 1. The SAR test's threshold (:attr:`zendar_dataset.detection.SarTestParams.threshold_db`): the
    test classifies points, so its threshold is the one that best separates the CFAR points inside
@@ -17,8 +18,6 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import sys
 from dataclasses import dataclass, replace
@@ -205,14 +204,10 @@ def fit_chain_params(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Fit the detection chain's SAR threshold and centre offset on a split.")
-    parser.add_argument("root", help="dataset root")
-    parser.add_argument("--split", default="train", help="split to fit on (default: train; test is refused)")
-    parser.add_argument("--sweep", action="store_true", help="also report the chain's AP over a grid of thresholds")
-    args = parser.parse_args(argv)
-    params, summary = fit_chain_params(args.root, args.split, sweep=args.sweep)
-    print(json.dumps({"summary": summary, "params": params.to_json()}, indent=1))
-    return 0
+    """``python -m zendar_baselines.chain_fit ROOT ...``: ``zendar-bench fit-chain ROOT ...``."""
+    from zendar_baselines.cli import main as zendar_bench_main
+
+    return zendar_bench_main(["fit-chain", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -1,11 +1,13 @@
 """Command line of ``zendar-bench``.
 
-    zendar-bench [--quick] [--config tiny|demo|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
+    zendar-bench [run] [--quick] [--config tiny|demo|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
+    zendar-bench fit-chain ROOT [--split S] [--sweep]
 
-Exit statuses as every command of the package: 0 done, 2 a problem with the user's files or
-arguments (one line, nothing lost), 1 an environment failure, 130 Ctrl-C (``zendar_dataset.cli.common``).
+Without a command, ``zendar-bench`` is ``zendar-bench run``. Exit statuses as every command of the
+package: 0 done, 2 a problem with the user's files or arguments (one line, nothing lost), 1 an
+environment failure, 130 Ctrl-C (``zendar_dataset.cli.common``).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from zendar_dataset.cli.arguments import DEVICES, seed_count
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 
@@ -24,30 +27,20 @@ DEFAULT_CONFIG = "demo"
 QUICK_CONFIG = "tiny"
 MAX_SEEDS = 100
 
-
-def _seeds(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of seeds, got {text!r}") from None
-    if not 1 <= value <= MAX_SEEDS:
-        raise argparse.ArgumentTypeError(f"expected 1 to {MAX_SEEDS} seeds, got {value}")
-    return value
+RUN_DESCRIPTION = (
+    "Reproduce Table 1 of the paper: CFAR with the SAR mask, and FPN-ResNet-34 and zoom-out "
+    "DenseNet-37/-67 trained supervised-only and pretrained on automatic labels then fine-tuned; every row "
+    "scored on the test split by the official evaluator. Finished steps are reused, so an interrupted run "
+    "resumes. 'zendar-bench verify' re-scores a finished run from its checkpoints."
+)
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"run directory (default: ./{DEFAULT_OUT})")
-    parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="where the CNNs run (default: cpu)")
+    parser.add_argument("--device", default="cpu", choices=DEVICES, help="where the CNNs run (default: cpu)")
 
 
-def bench_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="zendar-bench",
-        description="Reproduce Table 1 of the paper: CFAR with the SAR mask, and FPN-ResNet-34 and zoom-out "
-        "DenseNet-37/-67 trained supervised-only and pretrained on automatic labels then fine-tuned; every row "
-        "scored on the test split by the official evaluator. Finished steps are reused, so an interrupted run "
-        "resumes. 'zendar-bench verify' re-scores a finished run from its checkpoints.",
-    )
+def _run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true",
                         help=f"a short run: the {QUICK_CONFIG} config unless --config is given, 1 seed unless --seeds is")
     parser.add_argument("--config", choices=tuple(CONFIGS), default=None,
@@ -55,49 +48,66 @@ def bench_parser() -> argparse.ArgumentParser:
     parser.add_argument("--data", default=None,
                         help="dataset root to use, simulated there when absent (default: a cache directory under "
                         "$XDG_CACHE_HOME/zendar-dataset/bench)")
-    parser.add_argument("--seeds", type=_seeds, default=None,
+    parser.add_argument("--seeds", type=seed_count(MAX_SEEDS), default=None,
                         help="training seeds per CNN row; mean and std over them (default: the config's; 1 with --quick)")
     _common(parser)
-    return parser
+    parser.set_defaults(func=_bench)
 
 
-def verify_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="zendar-bench verify",
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="zendar-bench", description=RUN_DESCRIPTION)
+    _run_arguments(parser)  # without a command, zendar-bench [run's options] is run
+    commands = parser.add_subparsers(dest="command", metavar="[COMMAND]")
+
+    run = commands.add_parser("run", help="reproduce Table 1 (the command when none is given)", description=RUN_DESCRIPTION)
+    _run_arguments(run)
+
+    verify = commands.add_parser(
+        "verify",
+        help="re-score a finished run from its checkpoints",
         description="Re-score a finished run from its checkpoints and say whether every row reproduces its "
         "recorded AP within the stated tolerance (exit 0 when all do, 1 when one does not).",
     )
-    _common(parser)
-    return parser
+    _common(verify)
+    verify.set_defaults(func=_verify)
 
-
-def autolabels_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="zendar-bench autolabels",
+    autolabels = commands.add_parser(
+        "autolabels",
+        help="write the automatic labels of a split to a side store, with their quality",
         description="Write the automatic labels (paper §2.3: CFAR + DOA + the SAR static-scene test, segments grown "
         "in the range-Doppler map, clusters mixing moving and static points marked uncertain) of a split to a "
         "versioned side store beside the dataset, and their precision and recall against the manual labels per "
         "band where the scenes have labels. Re-running resumes.",
     )
-    parser.add_argument("root", help="dataset root")
-    parser.add_argument("--out", required=True, help="store directory (new, empty, or a store of this dataset); "
-                        "never inside ROOT")
-    parser.add_argument("--split", default="train", help="split to label (default: train)")
-    parser.add_argument("--no-quality", action="store_true",
-                        help="skip the comparison with the manual labels (needed for scenes without labels)")
+    autolabels.add_argument("root", help="dataset root")
+    autolabels.add_argument("--out", required=True, help="store directory (new, empty, or a store of this dataset); "
+                            "never inside ROOT")
+    autolabels.add_argument("--split", default="train", help="split to label (default: train)")
+    autolabels.add_argument("--no-quality", action="store_true",
+                            help="skip the comparison with the manual labels (needed for scenes without labels)")
+    autolabels.set_defaults(func=_autolabels)
+
+    fit_chain = commands.add_parser(
+        "fit-chain",
+        help="fit the detection chain's SAR threshold and centre offset on a split",
+        description="Fit the detection chain's SAR threshold and centre offset on a split.",
+    )
+    fit_chain.add_argument("root", help="dataset root")
+    fit_chain.add_argument("--split", default="train", help="split to fit on (default: train; test is refused)")
+    fit_chain.add_argument("--sweep", action="store_true", help="also report the chain's AP over a grid of thresholds")
+    fit_chain.set_defaults(func=_fit_chain)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["verify"]:
-        args = verify_parser().parse_args(argv[1:])
-        return run_cli(lambda: _verify(args))
-    if argv[:1] == ["autolabels"]:
-        args = autolabels_parser().parse_args(argv[1:])
-        return run_cli(lambda: _autolabels(args))
-    args = bench_parser().parse_args(argv)
-    return run_cli(lambda: _bench(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is not None and argv[0] != args.command:
+        # The options before a command were parsed as run's, and the command's own defaults would
+        # silently replace them (zendar-bench --out X verify would verify ./zendar-bench-out).
+        parser.error(f"{args.command!r} must come first: the options before it are run's")
+    return run_cli(lambda: args.func(args))
 
 
 def _check_device(device: str) -> None:
@@ -149,3 +159,12 @@ def _autolabels(args: argparse.Namespace) -> int:
     print(f"wrote the automatic labels of {len(scene_ids)} scenes to {Path(args.out) / 'store'}")
     return 0
 
+
+def _fit_chain(args: argparse.Namespace) -> int:
+    import json
+
+    from zendar_baselines.chain_fit import fit_chain_params
+
+    params, summary = fit_chain_params(args.root, args.split, sweep=args.sweep)
+    print(json.dumps({"summary": summary, "params": params.to_json()}, indent=1))
+    return 0

@@ -14,12 +14,12 @@ import sqlite3
 import sys
 from pathlib import Path
 
+from zendar_dataset.cli.arguments import positive_number, whole_number
 from zendar_dataset.cli.common import run_cli
+from zendar_dataset.cli.interrupt import exit_while_starting
 from zendar_dataset.errors import ZendarError
 
 EXIT_ENVIRONMENT = 1
-#: The most scene resamples the evaluator takes for its intervals.
-MAX_BOOTSTRAP = 100_000
 
 
 def _existing_store(db: str):
@@ -153,8 +153,10 @@ def _admin(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from zendar_dataset.eval.protocol import MAX_BOOTSTRAP_RESAMPLES
     from zendar_leaderboard.submission import DEFAULT_MAX_BYTES
 
+    max_bytes = whole_number("--max-bytes", 1)
     parser = argparse.ArgumentParser(
         prog="zendar-leaderboard",
         description="Submissions scored by the official evaluator against a hidden test split (docs/leaderboard.md).",
@@ -165,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", metavar="FILE")
     p.add_argument("--gt", default=None, help="ground truth (file or dataset root) to compare frame ids with")
     p.add_argument("--split", default=None, help="split of a dataset root given as --gt")
-    p.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES, help=f"size limit (default {DEFAULT_MAX_BYTES:,})")
+    p.add_argument("--max-bytes", type=max_bytes, default=DEFAULT_MAX_BYTES, help=f"size limit (default {DEFAULT_MAX_BYTES:,})")
     p.set_defaults(func=_check)
 
     p = sub.add_parser("serve", help="run the leaderboard server")
@@ -174,12 +176,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8000, help="port (0: any free port, printed)")
     p.add_argument("--split", default=None, help="split of a dataset root (default: test when labelled, else val)")
-    p.add_argument("--quota", type=int, default=3, help="scored submissions per team per rolling 30 days (default 3)")
-    p.add_argument("--max-bytes", type=int, default=DEFAULT_MAX_BYTES, help=f"largest upload (default {DEFAULT_MAX_BYTES:,})")
-    p.add_argument("--time-limit-s", type=float, default=600.0, help="scoring time per submission (default 600)")
-    p.add_argument("--memory-mb", type=int, default=4096, help="address-space limit of the scorer (default 4096)")
-    p.add_argument("--bootstrap", type=int, default=200, help="scene resamples for the intervals (default 200)")
-    p.add_argument("--workers", type=int, default=1, help="scorer processes (default 1)")
+    p.add_argument("--quota", type=whole_number("--quota", 1), default=3,
+                   help="scored submissions per team per rolling 30 days (default 3)")
+    p.add_argument("--max-bytes", type=max_bytes, default=DEFAULT_MAX_BYTES, help=f"largest upload (default {DEFAULT_MAX_BYTES:,})")
+    p.add_argument("--time-limit-s", type=positive_number("--time-limit-s"), default=600.0,
+                   help="scoring time per submission (default 600)")
+    p.add_argument("--memory-mb", type=whole_number("--memory-mb", 1), default=4096,
+                   help="address-space limit of the scorer (default 4096)")
+    p.add_argument("--bootstrap", type=whole_number("--bootstrap", 0, MAX_BOOTSTRAP_RESAMPLES), default=200,
+                   help="scene resamples for the intervals (default 200)")
+    p.add_argument("--workers", type=whole_number("--workers", 1), default=1, help="scorer processes (default 1)")
     p.add_argument("--verbose", action="store_true", help="log every request and score")
     p.set_defaults(func=_serve)
 
@@ -219,13 +225,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    for name in ("quota", "max_bytes", "workers", "memory_mb"):
-        if getattr(args, name, 1) <= 0:
-            parser.error(f"--{name.replace('_', '-')} must be positive")
-    if not 0 <= getattr(args, "bootstrap", 0) <= MAX_BOOTSTRAP:
-        parser.error(f"--bootstrap must be between 0 and {MAX_BOOTSTRAP:,}")
-    if getattr(args, "time_limit_s", 1) <= 0:
-        parser.error("--time-limit-s must be positive")
 
     def body() -> int:
         try:
@@ -243,5 +242,11 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(body)
 
 
+def zendar_leaderboard() -> int:
+    """Console script ``zendar-leaderboard``: Ctrl-C exits 130 from the start, imports included."""
+    exit_while_starting()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(zendar_leaderboard())

@@ -7,35 +7,32 @@ arguments and returning an exit status.
 
 from __future__ import annotations
 
-from zendar_dataset.cli.interrupt import exit_while_starting
-
-if __name__ == "__main__":  # python -m: Ctrl-C during the imports below exits 130 quietly
-    exit_while_starting()
-
 import argparse
 import sys
 
-from zendar_dataset.cli import (
-    data_convert,
-    data_export_gt,
-    data_fidelity,
-    data_import_release,
-    data_info,
-    data_synth,
-    data_validate,
-)
 from zendar_dataset.cli.common import run_cli
-
-SUBCOMMANDS = (data_info, data_validate, data_convert, data_export_gt, data_synth, data_import_release, data_fidelity)
+from zendar_dataset.cli.interrupt import exit_while_starting
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # The subcommands are imported here, not at the top, so that the console script's Ctrl-C
+    # handler is in place before their imports (zarr, numba).
+    from zendar_dataset.cli import (
+        data_convert,
+        data_export_gt,
+        data_fidelity,
+        data_import_release,
+        data_info,
+        data_synth,
+        data_validate,
+    )
+
     parser = argparse.ArgumentParser(
         prog="zendar-data",
         description="Inspect, validate, convert and synthesise Zendar format-v1 datasets.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in SUBCOMMANDS:
+    for module in (data_info, data_validate, data_convert, data_export_gt, data_synth, data_import_release, data_fidelity):
         module.register(subparsers)
     return parser
 
@@ -46,5 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(lambda: args.func(args))
 
 
+def zendar_data() -> int:
+    """Console script ``zendar-data``: Ctrl-C exits 130 from the start, imports included."""
+    exit_while_starting()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(zendar_data())

@@ -4,19 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from zendar_dataset.cli.arguments import DEVICES, split_ratios, whole_number
 from zendar_dataset.cli.common import writing
-from zendar_dataset.errors import ZendarError
 from zendar_dataset.sim.profiles import PROFILES
-
-
-def _ratios(text: str) -> tuple[float, float, float]:
-    try:
-        values = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected three numbers like 0.6,0.2,0.2, got {text!r}") from None
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expected three numbers (train,val,test), got {text!r}")
-    return values  # type: ignore[return-value]
 
 
 def default_jobs(n_scenes: int) -> int:
@@ -45,20 +35,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("out", metavar="OUT", help="dataset root to create (new or empty, or an interrupted run)")
     parser.add_argument("--profile", choices=sorted(PROFILES), default="demo", help="size of the simulation (default: demo)")
-    parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the profile's)")
+    parser.add_argument("--scenes", type=whole_number("--scenes", 1), default=None, help="number of scenes (default: the profile's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--duration-s", type=float, default=None, metavar="SECONDS",
                         help="length of each scene (default: the profile's; at least 0.5, a multiple of 0.1); recorded "
                         "with the profile in OUT/simulation.json")
-    parser.add_argument("--split-ratios", type=_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
+    parser.add_argument("--split-ratios", type=split_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
     parser.add_argument("--withhold-test-labels", action="store_true",
                         help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")
-    parser.add_argument("--jobs", "-j", type=int, default=None, metavar="N",
+    parser.add_argument("--jobs", "-j", type=whole_number("--jobs", 1), default=None, metavar="N",
                         help="worker processes, one scene each at a time (default: the usable CPUs, at most the "
                         "scenes left, but 1 for fewer scenes than twice the CPUs, where workers cost more than "
                         "they save; 1 = in this process); the output does not depend on it")
-    parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+    parser.add_argument("--device", choices=DEVICES, default="cpu",
                         help="where SAR images are backprojected: cpu (numba kernel, default) or cuda (torch on the "
                         "GPU: the same sum, equal to rounding; recorded in OUT/simulation.json). Each worker "
                         "process holds its own GPU memory: lower --jobs if the GPU runs out")
@@ -70,10 +60,6 @@ def _run(args: argparse.Namespace) -> int:
     from zendar_dataset.sim.generate import synthesize_dataset
     from zendar_dataset.sim.profiles import get_profile
 
-    if args.scenes is not None and args.scenes < 1:
-        raise ZendarError(f"--scenes must be at least 1, got {args.scenes}")
-    if args.jobs is not None and args.jobs < 1:
-        raise ZendarError(f"--jobs must be at least 1, got {args.jobs}")
     profile = get_profile(args.profile)
     if args.duration_s is not None:
         profile = profile.with_duration(args.duration_s)

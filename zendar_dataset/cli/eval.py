@@ -2,19 +2,19 @@
 
 from __future__ import annotations
 
-from zendar_dataset.cli.interrupt import exit_while_starting
-
-if __name__ == "__main__":  # python -m: Ctrl-C during the imports below exits 130 quietly
-    exit_while_starting()
-
 import argparse
 import sys
 
+from zendar_dataset.cli.arguments import whole_number
 from zendar_dataset.cli.common import run_cli, writing
-from zendar_dataset.eval.protocol import BANDS_M, DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES, MATCH_DISTANCE_M
+from zendar_dataset.cli.interrupt import exit_while_starting
 
 
 def build_parser() -> argparse.ArgumentParser:
+    # Imported here, not at the top, so that the console script's Ctrl-C handler is in place
+    # before the evaluator's imports (numpy, numba).
+    from zendar_dataset.eval.protocol import BANDS_M, DEFAULT_MAX_BYTES, MAX_BOOTSTRAP_RESAMPLES, MATCH_DISTANCE_M
+
     parser = argparse.ArgumentParser(
         prog="zendar-eval",
         description=(
@@ -41,18 +41,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plot", action="store_true", help="write PR curves per band as PNG into --out")
     parser.add_argument(
         "--bootstrap",
-        type=int,
+        type=whole_number("--bootstrap", 0, MAX_BOOTSTRAP_RESAMPLES),
         default=0,
         metavar="N",
         help=f"95%% confidence intervals from N scene resamples (at most {MAX_BOOTSTRAP_RESAMPLES:,})",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed (0 or more) for --bootstrap (default 0)")
+    parser.add_argument("--seed", type=whole_number("--seed", 0), default=0, help="seed (0 or more) for --bootstrap (default 0)")
     parser.add_argument(
         "--partial", action="store_true", help="evaluate only the frames present in the predictions"
     )
     parser.add_argument(
         "--max-bytes",
-        type=int,
+        type=whole_number("--max-bytes", 1),
         default=DEFAULT_MAX_BYTES,
         help=f"refuse input files larger than this (default {DEFAULT_MAX_BYTES:,})",
     )
@@ -116,14 +116,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.plot and args.out is None:
         parser.error("--plot needs --out DIR to write the PNG files into")
-    if not 0 <= args.bootstrap <= MAX_BOOTSTRAP_RESAMPLES:
-        parser.error(f"--bootstrap must be between 0 and {MAX_BOOTSTRAP_RESAMPLES:,}, got {args.bootstrap}")
-    if args.seed < 0:
-        parser.error(f"--seed must be 0 or more, got {args.seed}")
-    if args.max_bytes <= 0:
-        parser.error("--max-bytes must be positive")
     return run_cli(lambda: _run(args))
 
 
+def zendar_eval() -> int:
+    """Console script ``zendar-eval``: Ctrl-C exits 130 from the start, imports included."""
+    exit_while_starting()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(zendar_eval())

@@ -9,8 +9,11 @@ surfaces as a ``SystemError``). Both phases install their handler explicitly
 and unblock SIGINT, so a disposition inherited from the parent (ignored under
 ``nohup`` or ``cmd &`` in a script, or blocked) does not swallow Ctrl-C.
 
-The console scripts start here (:func:`zendar_data`, :func:`zendar_eval`), so
-the start-up handler is in place before the heavy imports.
+Each console script's function (``zendar_dataset.cli.data.zendar_data``,
+``zendar_dataset.cli.eval.zendar_eval``, ``zendar_baselines.entry.zendar_bench``,
+``zendar_leaderboard.cli.zendar_leaderboard``) calls :func:`exit_while_starting`
+first, in a module that imports nothing heavy, so the start-up handler is in
+place before the heavy imports.
 """
 
 from __future__ import annotations
@@ -97,20 +100,4 @@ def _quiet_abandoned_io() -> None:
     logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
 
 
-def zendar_data() -> int:
-    """Console script ``zendar-data``."""
-    exit_while_starting()
-    from zendar_dataset.cli.data import main
-
-    return main()
-
-
-def zendar_eval() -> int:
-    """Console script ``zendar-eval``."""
-    exit_while_starting()
-    from zendar_dataset.cli.eval import main
-
-    return main()
-
-
-__all__ = ["EXIT_INTERRUPTED", "exit_while_starting", "interrupts_raise", "zendar_data", "zendar_eval"]
+__all__ = ["EXIT_INTERRUPTED", "exit_while_starting", "interrupts_raise"]

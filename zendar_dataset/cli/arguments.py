@@ -1,0 +1,100 @@
+"""Checks of command-line values (``type=`` of ``add_argument``), shared by every command-line tool.
+
+A value that fails its check stops parsing: the usage line, ``PROG: error: MESSAGE`` on one line and
+exit status 2, before any work.
+
+Examples
+--------
+>>> import argparse
+>>> parser = argparse.ArgumentParser(prog="tool")
+>>> _ = parser.add_argument("--seed", type=whole_number("--seed", 0), default=0)
+>>> parser.parse_args(["--seed", "7"]).seed
+7
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+#: Where the tools that compute on arrays can run (``--device``).
+DEVICES = ("cpu", "cuda")
+
+
+def _out_of_range(message: str) -> argparse.ArgumentError:
+    # Without an argument the error prints as its message alone: "PROG: error: --seed must be ...".
+    # The message names the option itself, so argparse's "argument --seed: " prefix would say it twice.
+    return argparse.ArgumentError(None, message)
+
+
+def _parse(text: str, kind: type) -> int | float:
+    try:
+        return kind(text)
+    except ValueError:
+        # argparse's own words for a plain type=int or type=float.
+        raise argparse.ArgumentTypeError(f"invalid {kind.__name__} value: {text!r}") from None
+
+
+def whole_number(option: str, minimum: int, maximum: int | None = None) -> Callable[[str], int]:
+    """A ``type=`` for an integer option from ``minimum`` up (to ``maximum``, inclusive, when given).
+
+    Parameters
+    ----------
+    option : str
+        The option's name, which starts the message: ``--seed must be 0 or more, got -1``,
+        ``--bootstrap must be between 0 and 100,000, got -3``.
+    minimum, maximum : int
+        The bounds.
+
+    Returns
+    -------
+    callable
+        Text -> int, raising argparse's errors.
+    """
+    requirement = f"{minimum:,} or more" if maximum is None else f"between {minimum:,} and {maximum:,}"
+
+    def check(text: str) -> int:
+        value = _parse(text, int)
+        if value < minimum or (maximum is not None and value > maximum):
+            raise _out_of_range(f"{option} must be {requirement}, got {value}")
+        return value
+
+    return check
+
+
+def positive_number(option: str) -> Callable[[str], float]:
+    """A ``type=`` for a number option above 0 (a time limit): ``--time-limit-s must be positive, got 0.0``."""
+
+    def check(text: str) -> float:
+        value = _parse(text, float)
+        if value <= 0:
+            raise _out_of_range(f"{option} must be positive, got {value}")
+        return value
+
+    return check
+
+
+def seed_count(maximum: int) -> Callable[[str], int]:
+    """A ``type=`` for a number of training seeds, 1 to ``maximum``."""
+
+    def check(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number of seeds, got {text!r}") from None
+        if not 1 <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"expected 1 to {maximum} seeds, got {value}")
+        return value
+
+    return check
+
+
+def split_ratios(text: str) -> tuple[float, float, float]:
+    """A ``type=`` for ``train,val,test`` shares of the scenes, e.g. ``0.6,0.2,0.2``."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers like 0.6,0.2,0.2, got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three numbers (train,val,test), got {text!r}")
+    return values  # type: ignore[return-value]
