@@ -8,6 +8,6 @@ from zendar_dataset.cli.interrupt import exit_while_starting
 def zendar_bench() -> int:
     """Console script ``zendar-bench``."""
     exit_while_starting()
-    from zendar_baselines.cli import main
+    from zendar_baselines.bench.cli import main
 
     return main()

@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import re
+import weakref
 from typing import Any
 
 import fsspec
@@ -22,6 +23,18 @@ from zendar_dataset.format.reader import DatasetIndex, open_dataset
 from zendar_dataset.format.schema import DATASET_JSON
 
 SHA256_HEX = re.compile(r"[0-9a-f]{64}")
+# An opened dataset is hashed once: a run passes one DatasetIndex to every step.
+_FINGERPRINTS: weakref.WeakKeyDictionary[DatasetIndex, str] = weakref.WeakKeyDictionary()
+
+
+def dataset_index(dataset: DatasetIndex | str | os.PathLike) -> DatasetIndex:
+    """``dataset`` itself when already opened, else :func:`~zendar_dataset.format.reader.open_dataset` of it."""
+    return dataset if isinstance(dataset, DatasetIndex) else open_dataset(dataset)
+
+
+def dataset_location(dataset: DatasetIndex | str | os.PathLike) -> str | os.PathLike:
+    """The root of ``dataset`` as given: an opened dataset's ``root``, else ``dataset`` itself."""
+    return dataset.root if isinstance(dataset, DatasetIndex) else dataset
 
 
 def dataset_fingerprint(dataset: DatasetIndex | str | os.PathLike) -> str:
@@ -30,8 +43,9 @@ def dataset_fingerprint(dataset: DatasetIndex | str | os.PathLike) -> str:
     Parameters
     ----------
     dataset
-        A dataset opened with :func:`zendar_dataset.format.reader.open_dataset`, or its root (local
-        path or fsspec URL), which is opened (and its ``dataset.json`` checked) first.
+        A dataset opened with :func:`zendar_dataset.format.reader.open_dataset` (hashed once per
+        opened dataset), or its root (local path or fsspec URL), which is opened (and its
+        ``dataset.json`` checked) first.
 
     Raises
     ------
@@ -39,8 +53,13 @@ def dataset_fingerprint(dataset: DatasetIndex | str | os.PathLike) -> str:
         When ``dataset.json`` is missing or violates the schema (all problems listed), or vanished
         since the dataset was opened.
     """
-    if not isinstance(dataset, DatasetIndex):
-        dataset = open_dataset(dataset)
+    dataset = dataset_index(dataset)
+    if dataset not in _FINGERPRINTS:
+        _FINGERPRINTS[dataset] = _sha256_of_dataset_json(dataset)
+    return _FINGERPRINTS[dataset]
+
+
+def _sha256_of_dataset_json(dataset: DatasetIndex) -> str:
     location = stores.join_location(dataset.root, DATASET_JSON)
     try:
         if stores.is_url(location):

@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from harness import Spread, print_environment, print_load_after, time_calls
 
-from zendar_baselines.configs import get_config
+from zendar_baselines.bench.configs import get_config
 from zendar_baselines.cnn.models import MODEL_NAMES, build_model, parameter_count
 
 

@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 from torch.utils.flop_counter import FlopCounterMode
 
-from zendar_baselines.configs import get_config
+from zendar_baselines.bench.configs import get_config
 from zendar_dataset.sim.profiles import get_profile
 
 from zendar_baselines.cnn.models import build_model, parameter_count

@@ -14,26 +14,26 @@ from tqdm import tqdm
 
 from zendar_dataset.detection import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
 from zendar_dataset.format import frame_id
-from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 METHOD = "cfar-sar-dbscan"
 
 
 def cfar_predictions(
-    root: str | os.PathLike, split: str, params: ChainParams | None = None, progress: bool = True,
+    root: DatasetIndex | str | os.PathLike, split: str, params: ChainParams | None = None, progress: bool = True,
     storage_options: dict | None = None,
 ) -> dict[str, Any]:
     """The CFAR baseline's predictions for every frame of a split.
 
     Parameters
     ----------
-    root : str or path
-        Dataset root.
+    root : DatasetIndex, str or path
+        Dataset root, or the dataset already opened.
     split : str
         Split to predict (every SAR frame of its scenes, labelled or not).
     params : ChainParams, optional
         The chain's settings (default: the ones fitted on the training split, see
-        :mod:`zendar_baselines.chain_fit`).
+        :mod:`zendar_baselines.classical.chain_fit`).
     progress : bool
         Show a progress bar over the frames.
     storage_options : dict, optional
@@ -47,7 +47,7 @@ def cfar_predictions(
         found. Positions are metres in the ego frame at the frame's timestamp.
     """
     params = ChainParams() if params is None else params
-    index = open_dataset(root, storage_options)
+    index = root if isinstance(root, DatasetIndex) else open_dataset(root, storage_options)
     scene_ids = index.scene_ids(split)
     results: dict[str, list[dict[str, float]]] = {}
     with tqdm(desc=f"CFAR baseline {split}", unit="frame", disable=not progress) as bar:

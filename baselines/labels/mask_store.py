@@ -40,12 +40,12 @@ import numpy as np
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.atomic_files import json_text, prepare_out_dir, write_bytes_atomic, write_text_atomic
 from zendar_dataset.format import stores
-from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.format.reader import DatasetIndex
 from zendar_dataset.output_location import refuse_output_inside
 from zendar_dataset.temporary_files import owner_pid, remove_stale_temporaries
 
 from zendar_baselines.code_version import code_version as current_code_version
-from zendar_baselines.fingerprints import SHA256_HEX, dataset_fingerprint
+from zendar_baselines.fingerprints import SHA256_HEX, dataset_fingerprint, dataset_index, dataset_location
 from zendar_baselines.labels.mask_classes import MASK_CLASSES, MASK_DTYPE
 
 FORMAT_NAME = "zendar-autolabels"
@@ -307,7 +307,7 @@ class MaskStore:
     def create(
         cls,
         out_dir: str | os.PathLike,
-        dataset_root: str | os.PathLike,
+        dataset_root: DatasetIndex | str | os.PathLike,
         parameters: Mapping[str, Any],
         *,
         code_version: str | None = None,
@@ -340,8 +340,8 @@ class MaskStore:
             the dataset or the parameters are invalid.
         """
         out = Path(out_dir)
-        refuse_output_inside(out, datasets=(dataset_root,), what="auto-label store")
-        dataset = open_dataset(dataset_root)
+        refuse_output_inside(out, datasets=(dataset_location(dataset_root),), what="auto-label store")
+        dataset = dataset_index(dataset_root)
         fingerprint = dataset_fingerprint(dataset)
         parameters = _canonical_parameters(parameters)
         code_version = current_code_version() if code_version is None else code_version
@@ -350,7 +350,7 @@ class MaskStore:
             "format_version": FORMAT_VERSION,
             "code_version": code_version,
             "parameters": parameters,
-            "dataset": {"root": _root_text(dataset_root), "fingerprint": fingerprint},
+            "dataset": {"root": _root_text(dataset_location(dataset_root)), "fingerprint": fingerprint},
             "scenes": {},
             "created_utc": _created_utc(),
         }
@@ -377,7 +377,7 @@ class MaskStore:
             if recorded["dataset"]["fingerprint"] != fingerprint:
                 raise MaskStoreError(
                     f"auto-label store {out}: made from another dataset ({recorded['dataset']['root']}, "
-                    f"dataset.json SHA-256 {recorded['dataset']['fingerprint'][:12]}...), not {dataset_root} "
+                    f"dataset.json SHA-256 {recorded['dataset']['fingerprint'][:12]}...), not {dataset_location(dataset_root)} "
                     f"({fingerprint[:12]}...); choose another directory (nothing was changed)"
                 )
             if recorded["parameters"] == parameters and recorded["code_version"] == code_version:
@@ -401,7 +401,7 @@ class MaskStore:
     def open(
         cls,
         out_dir: str | os.PathLike,
-        dataset_root: str | os.PathLike | None = None,
+        dataset_root: DatasetIndex | str | os.PathLike | None = None,
         *,
         verify: bool = True,
         parameters: Mapping[str, Any] | None = None,
@@ -437,17 +437,17 @@ class MaskStore:
         problems = []
         dataset_scene_ids = None
         if dataset_root is not None:
-            dataset = open_dataset(dataset_root)
+            dataset = dataset_index(dataset_root)
             dataset_scene_ids = frozenset(dataset.scene_ids())
             fingerprint = dataset_fingerprint(dataset)
             if manifest["dataset"]["fingerprint"] != fingerprint:
                 problems.append(
                     f"{manifest_path}: dataset.fingerprint: made from another dataset ({manifest['dataset']['root']}, "
-                    f"dataset.json SHA-256 {manifest['dataset']['fingerprint'][:12]}...), not {dataset_root} ({fingerprint[:12]}...)"
+                    f"dataset.json SHA-256 {manifest['dataset']['fingerprint'][:12]}...), not {dataset_location(dataset_root)} ({fingerprint[:12]}...)"
                 )
             unknown = [scene_id for scene_id in manifest["scenes"] if scene_id not in dataset_scene_ids]
             if unknown:
-                problems.append(f"{manifest_path}: scenes: {unknown} are not scenes of {dataset_root}")
+                problems.append(f"{manifest_path}: scenes: {unknown} are not scenes of {dataset_location(dataset_root)}")
         if parameters is not None and manifest["parameters"] != _canonical_parameters(parameters):
             problems.append(f"{manifest_path}: parameters: made with {manifest['parameters']}, expected {_canonical_parameters(parameters)}")
         if code_version is not None and manifest["code_version"] != code_version:

@@ -24,10 +24,10 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
-from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.format.reader import DatasetIndex
 from zendar_dataset.output_location import refuse_output_inside
 
-from zendar_baselines.fingerprints import SHA256_HEX, canonical_json_sha256, dataset_fingerprint
+from zendar_baselines.fingerprints import SHA256_HEX, canonical_json_sha256, dataset_fingerprint, dataset_index, dataset_location
 
 FORMAT_NAME = "zendar-semisupervised-split"
 FORMAT_VERSION = 1
@@ -105,13 +105,13 @@ def _labelled_count(labelled_fraction: float, n_train: int) -> int:
     return min(max(math.floor(labelled_fraction * n_train + 0.5), 1), n_train - 1)
 
 
-def make_split(dataset_root: str | os.PathLike, labelled_fraction: float, seed: int) -> SemiSupervisedSplit:
+def make_split(dataset_root: DatasetIndex | str | os.PathLike, labelled_fraction: float, seed: int) -> SemiSupervisedSplit:
     """Draw the labelled part of a dataset's training scenes.
 
     Parameters
     ----------
     dataset_root
-        Dataset root (local path or fsspec URL).
+        Dataset root (local path or fsspec URL), or the dataset already opened.
     labelled_fraction
         Share of training scenes to put in the labelled part, in (0, 1).
     seed
@@ -128,17 +128,17 @@ def make_split(dataset_root: str | os.PathLike, labelled_fraction: float, seed: 
         problems.append(f"labelled_fraction: expected a number in (0, 1), found {labelled_fraction!r}")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         problems.append(f"seed: expected an integer >= 0, found {seed!r}")
-    dataset = open_dataset(dataset_root)
+    dataset = dataset_index(dataset_root)
     train = dataset.scene_ids(TRAIN_SPLIT)
     if len(train) < 2:
         problems.append(
-            f"{dataset_root}: the {TRAIN_SPLIT} split has {len(train)} scene(s); a semi-supervised split needs at "
+            f"{dataset_location(dataset_root)}: the {TRAIN_SPLIT} split has {len(train)} scene(s); a semi-supervised split needs at "
             "least 2 (1 labelled and 1 unlabelled)"
         )
     for split in _OTHER_SPLITS:
         shared = [scene_id for scene_id in train if scene_id in dataset.splits.get(split, [])]
         if shared:
-            problems.append(f"{dataset_root}: scenes {shared} are in both the {TRAIN_SPLIT} and the {split} split")
+            problems.append(f"{dataset_location(dataset_root)}: scenes {shared} are in both the {TRAIN_SPLIT} and the {split} split")
     if problems:
         raise SplitError("; ".join(problems), problems)
     order = np.random.default_rng(int(seed)).permutation(len(train))
@@ -152,7 +152,7 @@ def make_split(dataset_root: str | os.PathLike, labelled_fraction: float, seed: 
     )
 
 
-def write_split(split: SemiSupervisedSplit, path: str | os.PathLike, *, dataset_root: str | os.PathLike | None = None) -> Path:
+def write_split(split: SemiSupervisedSplit, path: str | os.PathLike, *, dataset_root: DatasetIndex | str | os.PathLike | None = None) -> Path:
     """Write ``split`` as versioned JSON with a ``sha256`` of its canonical content (atomic).
 
     Parameters
@@ -171,7 +171,7 @@ def write_split(split: SemiSupervisedSplit, path: str | os.PathLike, *, dataset_
     """
     path = Path(path)
     if dataset_root is not None:
-        refuse_output_inside(path, datasets=(dataset_root,), what="split file")
+        refuse_output_inside(path, datasets=(dataset_location(dataset_root),), what="split file")
     content = split.to_json()
     document = {**content, "sha256": canonical_json_sha256(content)}
     prepare_out_dir(path.parent)
@@ -226,7 +226,7 @@ def _document_problems(document: Any, where: str) -> list[str]:
     return problems
 
 
-def read_split(path: str | os.PathLike, dataset_root: str | os.PathLike | None = None) -> SemiSupervisedSplit:
+def read_split(path: str | os.PathLike, dataset_root: DatasetIndex | str | os.PathLike | None = None) -> SemiSupervisedSplit:
     """Read a split file written by :func:`write_split`, checking it.
 
     Parameters
@@ -253,17 +253,17 @@ def read_split(path: str | os.PathLike, dataset_root: str | os.PathLike | None =
         raise SplitError(f"{where}: expected the JSON of a semi-supervised split, found unreadable content ({exc})") from None
     problems = _document_problems(document, where)
     if dataset_root is not None and not problems:
-        dataset = open_dataset(dataset_root)
+        dataset = dataset_index(dataset_root)
         fingerprint = dataset_fingerprint(dataset)
         if document["dataset_fingerprint"] != fingerprint:
             problems.append(
                 f"{where}: dataset_fingerprint: drawn from another dataset ({document['dataset_fingerprint'][:12]}...), "
-                f"not {dataset_root} ({fingerprint[:12]}...)"
+                f"not {dataset_location(dataset_root)} ({fingerprint[:12]}...)"
             )
         train = set(dataset.scene_ids(TRAIN_SPLIT))
         outside = [s for s in document["labelled"] + document["unlabelled"] if s not in train]
         if outside:
-            problems.append(f"{where}: scenes {outside} are not in the {TRAIN_SPLIT} split of {dataset_root}")
+            problems.append(f"{where}: scenes {outside} are not in the {TRAIN_SPLIT} split of {dataset_location(dataset_root)}")
     if problems:
         raise SplitError("; ".join(problems), problems)
     return SemiSupervisedSplit(

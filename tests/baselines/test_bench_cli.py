@@ -103,8 +103,8 @@ def test_verify_rescores_from_the_checkpoints(quick_run):
 def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(quick_run, monkeypatch):
     """The run scores every CNN through one ScoringScenes (SAR magnitudes and maps read once): a model
     scored on kept scenes, on fresh ones, and with the cache over its budget gives the same bytes."""
-    from zendar_baselines import pipeline
-    from zendar_baselines.configs import get_config
+    from zendar_baselines.bench import scoring, steps
+    from zendar_baselines.bench.configs import get_config
 
     home, _ = quick_run
     out = home / "out"
@@ -114,20 +114,20 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
     recorded = [json.loads((d / "predictions.json").read_text())["results"] for d in seed_dirs]
 
     def score(seed_dir, scenes=None):
-        return pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), "cpu", scenes=scenes)["results"]
+        return scoring.cnn_predictions(root, config, steps.final_checkpoint(seed_dir), "cpu", scenes=scenes)["results"]
 
-    with pipeline.ScoringScenes(root) as scenes:
+    with scoring.ScoringScenes(root) as scenes:
         kept = [score(d, scenes) for d in seed_dirs] + [score(seed_dirs[0], scenes)]
         first = scenes.scene_ids()[0]
         with scenes.opened(first) as scene, scenes.opened(first) as again:
             assert again is scene and scene.maps
             assert all(not maps.flags.writeable for maps in scene.maps.values())
         with pytest.raises(ValueError, match="scenes of"):
-            pipeline.cnn_predictions(home, config, pipeline.final_checkpoint(seed_dirs[0]), "cpu", scenes=scenes)
+            scoring.cnn_predictions(home, config, steps.final_checkpoint(seed_dirs[0]), "cpu", scenes=scenes)
     assert kept == [*recorded, recorded[0]]
     assert score(seed_dirs[1]) == recorded[1]
-    monkeypatch.setattr(pipeline, "TEST_SCENE_CACHE_BYTES", 0)
-    with pipeline.ScoringScenes(root) as scenes:
+    monkeypatch.setattr(scoring, "TEST_SCENE_CACHE_BYTES", 0)
+    with scoring.ScoringScenes(root) as scenes:
         assert score(seed_dirs[0], scenes) == recorded[0]
         with scenes.opened(first) as scene, scenes.opened(first) as again:
             assert not scenes.keep and again is not scene

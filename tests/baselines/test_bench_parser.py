@@ -1,10 +1,11 @@
-"""``zendar-bench``'s commands: without one it is ``run``; ``fit-chain`` is ``python -m zendar_baselines.chain_fit``."""
+"""``zendar-bench``'s commands: without one it is ``run``; ``fit-chain`` is ``python -m zendar_baselines.classical.chain_fit``."""
 
 from __future__ import annotations
 
 import pytest
 
-from zendar_baselines import chain_fit, cli
+from zendar_baselines.bench import cli
+from zendar_baselines.classical import chain_fit
 
 
 def _parsed(*args: str) -> dict:
@@ -22,7 +23,7 @@ def test_no_command_is_run(args):
 
 
 @pytest.mark.parametrize("main", [lambda: cli.main(["fit-chain", "--help"]), lambda: chain_fit.main(["--help"])],
-                         ids=["zendar-bench fit-chain", "python -m zendar_baselines.chain_fit"])
+                         ids=["zendar-bench fit-chain", "python -m zendar_baselines.classical.chain_fit"])
 def test_fit_chain_help_exits_0(main, capsys):
     with pytest.raises(SystemExit) as exited:
         main()

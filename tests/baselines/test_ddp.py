@@ -11,7 +11,7 @@ import torch
 import torch.multiprocessing as mp
 
 from zendar_baselines.cnn.checkpoints import MANIFEST_NAME, load_checkpoint
-from zendar_baselines.configs import Schedule
+from zendar_baselines.bench.configs import Schedule
 from zendar_baselines.cnn.mask_frames import MaskFrames
 
 from tests.baselines.tiny_mask_model import TinyMaskNet, moving_target_task

@@ -10,7 +10,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from zendar_baselines import configs
+from zendar_baselines.bench import configs
 from zendar_baselines.cnn.models import MODEL_NAMES, build_model, parameter_count
 from zendar_baselines.cnn.models.common import GlobalPoolClassifier
 from zendar_baselines.cnn.models.densenet import DenseNetBackbone

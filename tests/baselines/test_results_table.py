@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from zendar_baselines.figures import bev_figure, pr_comparison_figure
-from zendar_baselines.results_table import Row, claims, csv_table, markdown_table
+from zendar_baselines.bench.figures import bev_figure, pr_comparison_figure
+from zendar_baselines.bench.results_table import Row, claims, csv_table, markdown_table
 from zendar_dataset.eval import MetricsRecord
 
 

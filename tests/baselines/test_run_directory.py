@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from zendar_baselines.run_directory import RUN_MARKER, RunDirectory
+from zendar_baselines.bench.run_directory import RUN_MARKER, RunDirectory
 from zendar_dataset.errors import ZendarError
 
 

@@ -12,7 +12,7 @@ import torch
 from zendar_dataset.errors import ZendarError
 
 from zendar_baselines.cnn.checkpoints import MANIFEST_NAME, load_checkpoint
-from zendar_baselines.configs import Schedule
+from zendar_baselines.bench.configs import Schedule
 from zendar_baselines.cnn.mask_frames import MaskFrames
 from zendar_baselines.cnn.training import (
     checkpoint_path,

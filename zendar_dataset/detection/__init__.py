@@ -21,7 +21,7 @@ dynamic rank above mixed ones.
 The radar sees a car's near face (the far side is occluded), so the centre of a cluster lies short
 of the car's centre along the line of sight. Each detection is pushed away from the radars by
 :attr:`ChainParams.centre_offset_m`, measured on the training split
-(``zendar_baselines.chain_fit``).
+(``zendar_baselines.classical.chain_fit``).
 
 Modules, bottom up: ``static_scene`` (the SAR value of a point and the static-scene test),
 ``params`` (:class:`ChainParams`), ``cells``, ``locate``, ``points``, ``clusters``, ``scene`` (the

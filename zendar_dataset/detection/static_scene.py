@@ -17,7 +17,7 @@ about 6 dB (3 x 3 pixels, tiny profile) to 8 dB (7 x 7, demo profile) over the m
 of the largest of ``n`` exponential powers is ``ln(n / ln 2)`` times the mean power, against
 ``ln 2`` times the mean for the median pixel. The threshold sits above that noise reading and below
 the static scatterers; its number is measured on the training split with
-``python -m zendar_baselines.chain_fit ROOT --split train`` (``zendar_baselines.chain_fit``).
+``python -m zendar_baselines.classical.chain_fit ROOT --split train`` (``zendar_baselines.classical.chain_fit``).
 
 Points that no SAR image covers (beyond the images' 60 m, outside the radars' field of view, or with
 no SAR frame near their time) read NaN: the test cannot confirm them static, nor call them dynamic.
@@ -37,7 +37,7 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M, SarFrames
 
 # Fitted on the training split (3 scenes, 180 frames, 8944 CFAR points) of
-# `zendar-data synth ROOT --profile demo --scenes 5` by `python -m zendar_baselines.chain_fit ROOT`:
+# `zendar-data synth ROOT --profile demo --scenes 5` by `python -m zendar_baselines.classical.chain_fit ROOT`:
 # the value that best separates the CFAR points inside labelled boxes from the others (Youden's J;
 # ROC AUC 0.74). Points on moving cars read a median 20 dB, the others 31 dB: the demo's 0.25 m
 # apertures smear a moving car far less than the paper's 2 m ones, so cars stay well above the noise.

@@ -22,24 +22,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-
-from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.atomic_files import write_json_atomic, write_text_atomic
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval import evaluate
-from zendar_dataset.eval.report import read_metrics, write_metrics
-from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.eval.report import read_metrics
+from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
-from zendar_baselines.code_version import code_version
-from zendar_baselines.configs import BenchConfig
-from zendar_baselines.fingerprints import dataset_fingerprint
-from zendar_baselines.results_table import METHOD_NAMES, Row, claims, csv_table, markdown_table
-from zendar_baselines.run_directory import RunDirectory, read_json
+from zendar_baselines.bench.configs import BenchConfig
+from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
+from zendar_baselines.bench.results_table import METHOD_NAMES, Row, claims, csv_table, markdown_table
+from zendar_baselines.bench.run_directory import RunDirectory, read_json
 
 if TYPE_CHECKING:
-    from zendar_baselines.pipeline import ScoringScenes
-
-#: Bootstrap resamples (over test scenes) for each row's 95 % interval.
-BOOTSTRAP_RESAMPLES = 200
+    from zendar_baselines.bench.scoring import ScoringScenes
 
 
 @dataclass(frozen=True)
@@ -82,8 +76,9 @@ def say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
-def ensure_dataset(options: BenchOptions) -> Path:
-    """The dataset to run on: simulated (resumably) when absent; checked to have labels where needed."""
+def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex]:
+    """The dataset to run on, and it opened: simulated (resumably) when absent; checked to have labels
+    where needed."""
     from zendar_dataset.sim.generate import synthesize_dataset
 
     config = options.config
@@ -103,7 +98,7 @@ def ensure_dataset(options: BenchOptions) -> Path:
             problems.append(f"scene {scene_id} has no labels (the bench trains on the train split's and scores the test split's)")
     if problems:
         raise ZendarError(f"{root}: cannot run the benchmark on this dataset:\n  " + "\n  ".join(problems))
-    return root
+    return root, index
 
 
 def synthesis_jobs(n_scenes: int) -> int:
@@ -115,67 +110,61 @@ def synthesis_jobs(n_scenes: int) -> int:
 
 def run_bench(options: BenchOptions) -> dict[str, Any]:
     """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content."""
+    from zendar_baselines.bench import scoring, steps
+
     started = time.monotonic()
     config = options.config
     RunDirectory.check_owner(options.out, {"config": config.name})
-    root = ensure_dataset(options)
-    identity = {"config": config.name, "dataset": dataset_fingerprint(root)}
-    run = RunDirectory(options.out, identity)
-    base_inputs = {"config": config.to_json(), "dataset": identity["dataset"], "code_version": code_version()}
+    root, dataset = ensure_dataset(options)
+    context = RunContext.open(root, config, options.out, options.device, dataset)
+    run = RunDirectory(options.out, {"config": config.name, "dataset": context.fingerprint})
+    base_inputs = context.step_inputs()
 
-    from zendar_baselines import pipeline
-
-    split_dir, split_key, _ = run.step("split", base_inputs, lambda d: pipeline.write_semi_supervised_split(root, config, d))
-    split = pipeline.read_semi_supervised_split(split_dir, root)
+    split_dir, split_key, _ = run.step("split", base_inputs, lambda d: steps.write_semi_supervised_split(context, d))
+    split = steps.read_semi_supervised_split(context, split_dir)
     say(f"[split] {len(split.labelled)} labelled / {len(split.unlabelled)} unlabelled training scenes")
 
     auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "split": split_key},
-                                     lambda d: pipeline.write_auto_labels(root, [*split.labelled, *split.unlabelled], d))
+                                     lambda d: steps.write_auto_labels(dataset, [*split.labelled, *split.unlabelled], d))
     quality = read_json(auto_dir / "quality.json")
     say("[autolabels] quality against the manual labels of the training scenes:\n" + quality["table"])
 
     masks_dir, masks_key, _ = run.step("label_masks", {**base_inputs, "split": split_key},
-                                       lambda d: pipeline.write_label_masks(root, split, d))
+                                       lambda d: steps.write_label_masks(context, split, d))
+    labels = TrainingLabels(split, auto_dir, masks_dir)
 
     rows: list[Row] = []
-    cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: _score_into(d, pipeline.cfar_predictions(root), root))
+    cfar_dir, _, _ = run.step("rows/cfar", base_inputs,
+                              lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset), root))
     rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_metrics(cfar_dir / "metrics.json")]))
 
-    with pipeline.ScoringScenes(root) as test_scenes:
+    with scoring.ScoringScenes(dataset) as test_scenes:
         for model_name in config.models:
             for pretrained in (False, True):
-                key = f"{model_name}-{'pretrained' if pretrained else 'supervised'}"
+                key = RowSeed(model_name, pretrained, 0).row_key
                 row = Row(key, METHOD_NAMES[model_name], pretrained, True)
                 for seed in range(options.seeds):
+                    row_seed = RowSeed(model_name, pretrained, seed)
                     inputs = {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
                               "model": model_name, "pretrained": pretrained, "seed": seed}
                     seed_dir, _, _ = run.step(
                         f"rows/{key}/seed-{seed}", inputs,
-                        lambda d, s=seed, p=pretrained, m=model_name: _train_and_score(
-                            d, root, config, split, auto_dir, masks_dir, m, p, s, options.device, run.path, test_scenes),
+                        lambda d, r=row_seed: _train_and_score(context, labels, r, d, test_scenes),
                     )
                     row.seed_metrics.append(read_metrics(seed_dir / "metrics.json"))
                 _copy_first_seed(run.path / "rows" / key)
                 rows.append(row)
 
-    results = _write_outputs(run.path, root, config, options, rows, quality, time.monotonic() - started)
-    return results
+    return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started)
 
 
-def _score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
-    write_json_atomic(out_dir / "predictions.json", predictions)
-    metrics = evaluate(out_dir / "predictions.json", str(root), split="test", bootstrap=BOOTSTRAP_RESAMPLES)
-    write_metrics(metrics, out_dir)
-
-
-def _train_and_score(out_dir: Path, root: Path, config: BenchConfig, split, auto_dir: Path, masks_dir: Path,
-                     model_name: str, pretrained: bool, seed: int, device: str, run_path: Path,
+def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,
                      test_scenes: ScoringScenes) -> None:
-    from zendar_baselines import pipeline
+    from zendar_baselines.bench import scoring, steps
 
-    checkpoint = pipeline.train_row(out_dir, root, config, split, auto_dir, masks_dir, run_path / "inputs", model_name,
-                                    pretrained, seed, device)
-    _score_into(out_dir, pipeline.cnn_predictions(root, config, checkpoint, device, scenes=test_scenes), root)
+    checkpoint = steps.train_row(context, labels, row, out_dir)
+    predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, scenes=test_scenes)
+    scoring.score_into(out_dir, predictions, context.root)
 
 
 def _copy_first_seed(row_dir: Path) -> None:
@@ -184,21 +173,21 @@ def _copy_first_seed(row_dir: Path) -> None:
         write_json_atomic(row_dir / name, read_json(row_dir / "seed-0" / name))
 
 
-def _write_outputs(out: Path, root: Path, config: BenchConfig, options: BenchOptions, rows: list[Row],
-                   quality: dict[str, Any], elapsed_s: float) -> dict[str, Any]:
-    from zendar_baselines import pipeline
-    from zendar_baselines.figures import write_pr_comparisons
+def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: dict[str, Any],
+                   elapsed_s: float) -> dict[str, Any]:
+    from zendar_baselines.bench.figures import write_bev_figure, write_pr_comparisons
 
-    title = f"Moving-car AP on the test split, config {config.name}, {options.seeds} seed(s) (paper Table 1 beside)"
+    config, out = context.config, context.run_path
+    title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
     verdicts = claims(rows)
     results = {
         "format": "zendar-bench-results",
         "format_version": 1,
         "config": config.to_json(),
-        "seeds": options.seeds,
-        "device": options.device,
-        "code_version": code_version(),
-        "dataset": {"root": str(root), "fingerprint": dataset_fingerprint(root)},
+        "seeds": seeds,
+        "device": context.device,
+        "code_version": context.code_version,
+        "dataset": {"root": str(context.root), "fingerprint": context.fingerprint},
         "rows": [row.to_json() for row in rows],
         "claims": verdicts,
         "autolabel_quality": quality["quality"],
@@ -211,15 +200,13 @@ def _write_outputs(out: Path, root: Path, config: BenchConfig, options: BenchOpt
         + (f" ({'; '.join(v['failures'])})" if v["failures"] else "")
         for name, v in verdicts.items()
     ) + "\n"
-    from zendar_dataset.atomic_files import write_text_atomic
-
     write_text_atomic(out / "table.md", table)
     write_text_atomic(out / "table.csv", csv_table(rows))
     write_json_atomic(out / "autolabel_quality.json", quality["quality"])
     curves = [(_label(row), row.seed_metrics[0]) for row in rows]
     write_pr_comparisons(curves, out)
-    pipeline.write_bev_figure(out / "bev.png", root, {_label(row): out / "rows" / row.key / "predictions.json"
-                                                      for row in rows})
+    write_bev_figure(out / "bev.png", context.dataset,
+                     {_label(row): out / "rows" / row.key / "predictions.json" for row in rows})
     say(table)
     return results
 

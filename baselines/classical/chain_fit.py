@@ -1,7 +1,7 @@
 """The detection chain's two measured numbers, fitted on a split's labels (the training split; never test).
 
     zendar-bench fit-chain ROOT [--split train] [--sweep]
-    python -m zendar_baselines.chain_fit ROOT [--split train] [--sweep]   (the same)
+    python -m zendar_baselines.classical.chain_fit ROOT [--split train] [--sweep]   (the same)
 
 1. The SAR test's threshold (:attr:`zendar_dataset.detection.SarTestParams.threshold_db`): the
    test classifies points, so its threshold is the one that best separates the CFAR points inside
@@ -204,8 +204,8 @@ def fit_chain_params(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m zendar_baselines.chain_fit ROOT ...``: ``zendar-bench fit-chain ROOT ...``."""
-    from zendar_baselines.cli import main as zendar_bench_main
+    """``python -m zendar_baselines.classical.chain_fit ROOT ...``: ``zendar-bench fit-chain ROOT ...``."""
+    from zendar_baselines.bench.cli import main as zendar_bench_main
 
     return zendar_bench_main(["fit-chain", *(sys.argv[1:] if argv is None else argv)])
 

@@ -19,11 +19,11 @@ from zendar_dataset.eval import evaluate_record
 from zendar_dataset.eval.protocol import BAND_NAMES
 from zendar_dataset.eval.report import read_metrics
 
-from zendar_baselines.configs import BenchConfig, Schedule
-from zendar_baselines.run_directory import RUN_MARKER, read_json
+from zendar_baselines.bench.configs import BenchConfig, Schedule
+from zendar_baselines.bench.run_directory import RUN_MARKER, read_json
 
 if TYPE_CHECKING:
-    from zendar_baselines.pipeline import ScoringScenes
+    from zendar_baselines.bench.scoring import ScoringScenes
 
 #: Largest |AP difference| per band (fraction) for a row to count as reproduced.
 AP_TOLERANCE = 0.01
@@ -54,7 +54,7 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
     ZendarError
         When ``out`` is not a finished zendar-bench run, or a checkpoint is missing or corrupt.
     """
-    from zendar_baselines import pipeline
+    from zendar_baselines.bench.scoring import ScoringScenes
 
     if not (out / RUN_MARKER).is_file() or not (out / "results.json").is_file():
         raise ZendarError(f"--out {out}: not a finished zendar-bench run (no {RUN_MARKER} and results.json)")
@@ -67,7 +67,7 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
         raise ZendarError(f"{out / 'results.json'}: not a zendar-bench results file ({exc!r} missing)") from None
     lines = [f"re-scoring {out} (tolerance {AP_TOLERANCE:g} AP per band)"]
     all_reproduced = True
-    with pipeline.ScoringScenes(root) as test_scenes:
+    with ScoringScenes(root) as test_scenes:
         for row in rows:
             all_reproduced &= _verify_row(out, row, root, config, device, test_scenes, lines)
     lines.append("every row reproduces" if all_reproduced else "some rows do not reproduce within the tolerance")
@@ -77,7 +77,8 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
 def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: str,
                 test_scenes: ScoringScenes, lines: list[str]) -> bool:
     """Re-score every seed of one row, appending a line each; True when all reproduce."""
-    from zendar_baselines import pipeline
+    from zendar_baselines.bench.scoring import cfar_predictions, cnn_predictions
+    from zendar_baselines.bench.steps import final_checkpoint
 
     key = row["key"]
     seed_dirs = sorted((out / "rows" / key).glob("seed-*")) if key != "cfar" else [out / "rows" / key]
@@ -87,10 +88,9 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
     for seed_dir in seed_dirs:
         recorded = read_metrics(seed_dir / "metrics.json").ap
         if key == "cfar":
-            predictions = pipeline.cfar_predictions(root)
+            predictions = cfar_predictions(test_scenes.index)
         else:
-            predictions = pipeline.cnn_predictions(root, config, pipeline.final_checkpoint(seed_dir), device,
-                                                   scenes=test_scenes)
+            predictions = cnn_predictions(test_scenes.index, config, final_checkpoint(seed_dir), device, scenes=test_scenes)
         again = evaluate_record(predictions, str(root), split="test").ap
         worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
                     default=0.0)

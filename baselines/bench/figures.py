@@ -7,6 +7,7 @@ matplotlib on the Agg canvas (no display needed); files are written atomically.
 from __future__ import annotations
 
 import io
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -16,9 +17,17 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
+from zendar_dataset.atomic_files import write_bytes_atomic
+from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BANDS_M
 from zendar_dataset.eval.records import MetricsRecord, as_metrics_record
-from zendar_dataset.atomic_files import write_bytes_atomic
+from zendar_dataset.format import frame_id
+from zendar_dataset.format.reader import DatasetIndex
+from zendar_dataset.geometry.frames import sar_pixel_to_ecef
+from zendar_dataset.sar.frames import SarFrames
+
+from zendar_baselines.bench.run_directory import read_json
+from zendar_baselines.fingerprints import dataset_index
 
 _MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*")
 
@@ -136,3 +145,45 @@ def bev_figure(
 def write_bev(figure: Figure, path: Path) -> Path:
     """Write a figure of :func:`bev_figure` as PNG, atomically."""
     return _save_png(figure, path)
+
+
+#: Pixels per side of the SAR image drawn in the bird's-eye figure (subsampled; a figure needs no more).
+BEV_PIXELS = 300
+
+
+def write_bev_figure(path: Path, dataset: DatasetIndex | str | os.PathLike, predictions: dict[str, Path]) -> Path:
+    """The test frame with the most labelled cars: SAR images, ground truth, every method's detections.
+
+    ``dataset``: its root, or the dataset already opened; ``predictions``: label -> predictions file.
+    """
+    index = dataset_index(dataset)
+    best: tuple[int, str, int] | None = None
+    for scene_id in index.scene_ids("test"):
+        labels = index.open_scene(scene_id).labels()
+        stamps, counts = np.unique(labels["timestamp_ns"], return_counts=True)
+        if stamps.size and (best is None or counts.max() > best[0]):
+            best = (int(counts.max()), scene_id, int(stamps[np.argmax(counts)]))
+    if best is None:
+        raise ZendarError(f"{index.root}: the test split has no labelled car to draw")
+    _, scene_id, frame_ns = best
+    with index.open_scene(scene_id) as reader:
+        poses = reader.ego_poses()
+        sar = SarFrames(reader)
+        layers = []
+        for sensor in sar.sensors:
+            frame = sar.frame_index(sensor, frame_ns)
+            if frame is None:
+                continue
+            image_db, _ = sar.image_db(sensor, frame)
+            step = max(1, max(image_db.shape) // BEV_PIXELS)
+            i, j = np.meshgrid(np.arange(0, image_db.shape[0], step), np.arange(0, image_db.shape[1], step), indexing="ij")
+            points_ecef = sar_pixel_to_ecef(i, j, sar.origin[sensor][frame], sar.di[sensor][frame], sar.dj[sensor][frame])
+            xy_ego = poses.ecef_to_ego(points_ecef.reshape(-1, 3), frame_ns)[:, :2].reshape(*i.shape, 2)
+            layers.append((image_db[::step, ::step], xy_ego))
+        labels = reader.labels()
+    rows = labels["timestamp_ns"] == frame_ns
+    truth = [{name: float(labels[name][k]) for name in ("x", "y", "length", "width", "yaw")} for k in np.flatnonzero(rows)]
+    frame = frame_id(scene_id, frame_ns)
+    detections = {label: read_json(file)["results"].get(frame, []) for label, file in predictions.items()}
+    figure = bev_figure(layers, truth, detections, f"{frame}: SAR, ground truth (boxes) and detections")
+    return write_bev(figure, path)

@@ -20,7 +20,7 @@ from zendar_dataset.cli.arguments import DEVICES, seed_count
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 
-from zendar_baselines.configs import CONFIGS, get_config
+from zendar_baselines.bench.configs import CONFIGS, get_config
 
 DEFAULT_OUT = "zendar-bench-out"
 DEFAULT_CONFIG = "demo"
@@ -119,7 +119,7 @@ def _check_device(device: str) -> None:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from zendar_baselines.bench import BenchOptions, run_bench
+    from zendar_baselines.bench.run import BenchOptions, run_bench
 
     _check_device(args.device)
     config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
@@ -132,7 +132,7 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from zendar_baselines.verify import verify_run
+    from zendar_baselines.bench.verify import verify_run
 
     _check_device(args.device)
     report = verify_run(Path(args.out), args.device)
@@ -142,18 +142,18 @@ def _verify(args: argparse.Namespace) -> int:
 
 def _autolabels(args: argparse.Namespace) -> int:
     from zendar_dataset.format.reader import open_dataset
-    from zendar_baselines.pipeline import write_auto_labels
+    from zendar_baselines.bench.steps import write_auto_labels
 
-    scene_ids = open_dataset(args.root).scene_ids(args.split)
+    index = open_dataset(args.root)
+    scene_ids = index.scene_ids(args.split)
     if not scene_ids:
         raise ZendarError(f"{args.root}: split {args.split!r} has no scenes")
     if not args.no_quality:
-        index = open_dataset(args.root)
         unlabelled = [scene for scene in scene_ids if index.open_scene(scene).labels() is None]
         if unlabelled:
             raise ZendarError(f"{args.root}: {', '.join(unlabelled)} of split {args.split!r} have no labels to "
                               "measure the automatic labels against; add --no-quality")
-    document = write_auto_labels(Path(args.root), scene_ids, Path(args.out), quality=not args.no_quality)
+    document = write_auto_labels(index, scene_ids, Path(args.out), quality=not args.no_quality)
     if document is not None:
         print(document["table"])
     print(f"wrote the automatic labels of {len(scene_ids)} scenes to {Path(args.out) / 'store'}")
@@ -163,7 +163,7 @@ def _autolabels(args: argparse.Namespace) -> int:
 def _fit_chain(args: argparse.Namespace) -> int:
     import json
 
-    from zendar_baselines.chain_fit import fit_chain_params
+    from zendar_baselines.classical.chain_fit import fit_chain_params
 
     params, summary = fit_chain_params(args.root, args.split, sweep=args.sweep)
     print(json.dumps({"summary": summary, "params": params.to_json()}, indent=1))

@@ -1,0 +1,214 @@
+"""The steps of ``zendar-bench`` (:mod:`zendar_baselines.bench.run`) before scoring, each writing into its
+step directory: the semi-supervised split, the automatic labels and their quality, the manual-label
+masks of the labelled part, and the training of one seed of one CNN row.
+
+Data flow: the training scenes' cubes become normalised log-power maps (memory-mapped ``.npy`` files,
+so the paper config never holds a split in memory); automatic masks of every training scene and
+manual-label masks of the labelled part only are the targets (:mod:`zendar_baselines.bench.scoring`
+puts the trained models to the test split).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.format.reader import DatasetIndex, SceneReader
+from zendar_dataset.radar import FmcwParams, range_axis_m
+from zendar_dataset.sar.frames import SarFrames
+from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
+
+from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
+from zendar_baselines.bench.run_directory import read_json
+from zendar_baselines.code_version import code_version
+from zendar_baselines.fingerprints import dataset_index
+from zendar_baselines.labels.mask_store import MaskStore
+from zendar_baselines.labels.masks import MaskParams, scene_masks
+from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
+from zendar_baselines.labels.splits import SemiSupervisedSplit, make_split, read_split, write_split
+
+SPLIT_FILE = "split.json"
+STORE_DIR = "store"
+CHECKPOINT_RECORD = "checkpoint.json"
+
+
+def mask_parameters(params: MaskParams | None = None) -> dict[str, Any]:
+    """The mask settings as JSON (recorded in the stores)."""
+    return dataclasses.asdict(MaskParams() if params is None else params)
+
+
+# --- split ---------------------------------------------------------------------------------------
+
+
+def write_semi_supervised_split(run: RunContext, step_dir: Path) -> None:
+    """``split.json``: the training scenes' labelled and unlabelled parts (seeded by the config)."""
+    split = make_split(run.dataset, run.config.labelled_fraction, seed=run.config.sim_seed)
+    write_split(split, step_dir / SPLIT_FILE, dataset_root=run.dataset)
+
+
+def read_semi_supervised_split(run: RunContext, step_dir: Path) -> SemiSupervisedSplit:
+    """The split written by :func:`write_semi_supervised_split`, checked against the dataset."""
+    return read_split(step_dir / SPLIT_FILE, dataset_root=run.dataset)
+
+
+# --- masks ---------------------------------------------------------------------------------------
+
+
+def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
+    n_range, n_doppler = masks.shape[1:]
+    params = FmcwParams.from_calibration(reader.calibration.sensors[radar], n_samples=n_range, n_chirps=n_doppler)
+    return range_axis_m(n_range, params.range_bin_m)
+
+
+def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list[str], out_dir: Path, *,
+                      quality: bool = True) -> dict[str, Any] | None:
+    """Automatic masks of ``scene_ids`` (a mask store in ``out_dir / "store"``) and their quality.
+
+    With ``quality``, every scene's masks are also measured against its manual-label masks and the
+    pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
+    labels, feed no model and choose nothing, so they may read the manual labels of any scene.
+
+    Parameters
+    ----------
+    dataset
+        The dataset root, or the dataset already opened.
+
+    Raises
+    ------
+    ZendarError
+        For ``quality`` on a scene without labels, or a store of another dataset in ``out_dir``.
+    """
+    index = dataset_index(dataset)
+    parameters = mask_parameters()
+    store = MaskStore.create(out_dir / STORE_DIR, index, parameters, code_version=code_version())
+    scores = []
+    for scene_id in tqdm(sorted(scene_ids), desc="automatic labels", unit="scene"):
+        with index.open_scene(scene_id) as reader:
+            if store.has_scene(scene_id, parameters, code_version()):
+                auto = store.scene(scene_id)
+            else:
+                sar = SarFrames(reader)
+                auto = {radar: scene_masks(reader, radar, "auto", sar=sar, progress=False) for radar in reader.sensors("radar")}
+                store.write_scene(scene_id, auto)
+            if quality:
+                for radar, (_, auto_masks) in auto.items():
+                    _, label_masks = scene_masks(reader, radar, "labels", progress=False)
+                    scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
+    if not quality:
+        return None
+    pooled = combine_quality(scores)
+    document = {"quality": pooled, "table": format_quality(pooled)}
+    write_json_atomic(out_dir / "quality.json", document)
+    return document
+
+
+def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path) -> None:
+    """Manual-label masks of the labelled part of the training scenes only (a store of the same format)."""
+    split.check_manual_label_use(split.labelled)
+    parameters = {**mask_parameters(), "kind": "labels"}
+    store = MaskStore.create(step_dir / STORE_DIR, run.dataset, parameters, code_version=run.code_version)
+    for scene_id in tqdm(split.labelled, desc="manual-label masks", unit="scene"):
+        if store.has_scene(scene_id, parameters, run.code_version):
+            continue
+        with run.dataset.open_scene(scene_id) as reader:
+            store.write_scene(scene_id, {radar: scene_masks(reader, radar, "labels", progress=False)
+                                         for radar in reader.sensors("radar")})
+
+
+# --- inputs --------------------------------------------------------------------------------------
+
+
+def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
+    """Normalised log-power maps ``[N, A, R, D]`` float32 of one radar, memory-mapped from ``cache_dir``.
+
+    Written once per scene and radar (atomically: temporary name, then rename) and reused. The
+    maps are streamed into a memory-mapped temporary, so they are renamed here rather than passed
+    whole to :mod:`zendar_dataset.atomic_files`.
+    """
+    from zendar_baselines.cnn.maps import log_power_maps
+
+    path = cache_dir / f"{reader.scene_id}__{radar}.npy"
+    if not path.is_file():
+        cubes = reader.array(f"radar/{radar}/cube")
+        n, n_range, n_doppler, n_rx = cubes.shape
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        temp = temporary_sibling(path)
+        try:
+            maps = np.lib.format.open_memmap(temp, mode="w+", dtype=np.float32, shape=(n, n_rx, n_range, n_doppler))
+            log_power_maps(cubes, out=maps)
+            maps.flush()
+            del maps
+            os.replace(temp, path)
+        finally:
+            remove_temporary(temp)
+    return np.load(path, mmap_mode="r")
+
+
+# --- training ------------------------------------------------------------------------------------
+
+
+def _frames(run: RunContext, scenes: list[str], store_dir: Path):
+    from torch.utils.data import ConcatDataset
+
+    from zendar_baselines.cnn.mask_frames import MaskFrames
+
+    store = MaskStore.open(store_dir, run.dataset)
+    parts = []
+    for scene_id in scenes:
+        masks = store.scene(scene_id)
+        with run.dataset.open_scene(scene_id) as reader:
+            for radar in reader.sensors("radar"):
+                timestamps, targets = masks[radar]
+                if not np.array_equal(timestamps, reader.timestamps(f"radar/{radar}")):
+                    raise ZendarError(f"{store_dir}: the masks of {scene_id} {radar} do not match the dataset's cube "
+                                      "times; the store was made from another dataset")
+                parts.append(MaskFrames(scene_maps(reader, radar, run.inputs_dir), targets, window=run.config.window))
+    return ConcatDataset(parts)
+
+
+def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path) -> Path:
+    """Train one seed of one Table 1 row; returns the final checkpoint (recorded in ``checkpoint.json``).
+
+    Supervised-only: the labelled part's manual masks with ``config.supervised``. Pretrained:
+    every training scene's automatic masks with ``config.pretrain``, then the labelled part's
+    manual masks with ``config.finetune`` starting from those weights.
+    """
+    from zendar_baselines.cnn.models import build_model, parameter_count
+    from zendar_baselines.cnn.training import seed_everything, train
+
+    config, split = run.config, labels.split
+    split.check_manual_label_use(split.labelled)
+    labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR)
+    in_channels = labelled.datasets[0].in_channels
+
+    def fresh_model():
+        seed_everything(row.seed)
+        return build_model(row.model_name, in_channels, config.width_scale).to(run.device)
+
+    init_from = None
+    if row.pretrained:
+        everything = _frames(run, sorted((*split.labelled, *split.unlabelled)), labels.auto_dir / STORE_DIR)
+        model = fresh_model()
+        result = train(model, everything, config.pretrain, seed=row.seed, out_dir=out_dir / "pretrain", device=run.device,
+                       description=f"{row.model_name} pretrain seed {row.seed} ({parameter_count(model):,} parameters)")
+        init_from = result.checkpoint_path
+    model = fresh_model()
+    schedule = config.finetune if row.pretrained else config.supervised
+    phase = "fine-tune" if row.pretrained else "supervised"
+    result = train(model, labelled, schedule, seed=row.seed, out_dir=out_dir / phase, device=run.device, init_from=init_from,
+                   description=f"{row.model_name} {phase} seed {row.seed} ({parameter_count(model):,} parameters)")
+    write_json_atomic(out_dir / CHECKPOINT_RECORD, {"checkpoint": str(result.checkpoint_path.relative_to(out_dir)),
+                                                    "epoch_losses": list(result.epoch_losses)})
+    return result.checkpoint_path
+
+
+def final_checkpoint(seed_dir: Path) -> Path:
+    """The checkpoint a row's seed directory recorded."""
+    return seed_dir / read_json(seed_dir / CHECKPOINT_RECORD)["checkpoint"]
