@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from zendar_baselines.bench.configs import MODEL_NAMES, Schedule  # noqa: E402
-from zendar_baselines.cnn.maps import MaskFrames  # noqa: E402
+from zendar_baselines.cnn.mask_frames import MaskFrames  # noqa: E402
 from zendar_baselines.cnn.models import build_model  # noqa: E402
 from zendar_baselines.cnn.training import positive_class_weight, seed_everything, train  # noqa: E402
 

@@ -19,6 +19,10 @@ from zendar_leaderboard.pages import entry_page, ranking_page
 from zendar_leaderboard.store import Store
 
 
+# A published site is read by a web server running as another user, whatever the publisher's umask.
+PUBLISHED_MODE = 0o644
+
+
 def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
     """Write the static leaderboard into ``out`` (created if missing).
 
@@ -39,7 +43,7 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
             continue
         page = entry_page(*found, static=True, root="../")
         path = out / "entry" / f"{entry['id']}.html"
-        write_bytes_atomic(path, page.encode())
+        write_bytes_atomic(path, page.encode(), mode=PUBLISHED_MODE)
         written.append(path)
     files = {
         "leaderboard.json": orjson.dumps(board, option=orjson.OPT_INDENT_2),
@@ -47,6 +51,6 @@ def render_site(store: Store, out: str | os.PathLike) -> list[Path]:
         "index.html": ranking_page(board, entry_href=lambda i: f"entry/{i}.html", static=True).encode(),
     }
     for name, data in files.items():
-        write_bytes_atomic(out / name, data)
+        write_bytes_atomic(out / name, data, mode=PUBLISHED_MODE)
         written.append(out / name)
     return written

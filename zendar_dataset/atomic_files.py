@@ -18,12 +18,12 @@ from typing import Any
 from zendar_dataset.temporary_files import remove_stale_temporaries, remove_temporary, temporary_sibling
 
 
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, mode: int | None = None) -> None:
     """Write ``data`` to ``path`` through a temporary sibling, fsync and an atomic rename.
 
-    The file is created with mode 0o666 minus the umask, like any file the user creates; stale
-    temporaries of ``path`` left by a killed run are removed first. On any error the temporary is
-    removed and ``path`` is untouched.
+    The file is created with mode 0o666 minus the umask, like any file the user creates, unless
+    ``mode`` is given; stale temporaries of ``path`` left by a killed run are removed first. On any
+    error the temporary is removed and ``path`` is untouched.
 
     Parameters
     ----------
@@ -31,6 +31,8 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
         The final file; its folder must exist.
     data
         The whole content.
+    mode
+        Permission bits the file gets whatever the umask (e.g. 0o644 for a published page).
     """
     path = Path(path)
     remove_stale_temporaries(path.parent, path.name)
@@ -41,6 +43,8 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
             handle.write(data)
             handle.flush()
             os.fsync(handle.fileno())
+        if mode is not None:
+            os.chmod(temp, mode)
         os.replace(temp, path)
     finally:
         remove_temporary(temp)

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate_record
 from zendar_dataset.eval.protocol import BAND_NAMES
-from zendar_dataset.eval.report import read_metrics
+from zendar_dataset.eval.report import format_percent, read_metrics
 
 from zendar_baselines.bench.configs import BenchConfig, Schedule
 from zendar_baselines.bench.run_directory import RUN_MARKER, read_json
@@ -97,10 +97,6 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
         same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
         ok = same_bands and worst <= AP_TOLERANCE and not math.isnan(worst)
         all_reproduced &= ok
-        shown = " ".join(f"{b} {_pct(recorded[b])}->{_pct(again[b])}" for b in BANDS)
+        shown = " ".join(f"{b} {format_percent(recorded[b])}->{format_percent(again[b])}" for b in BANDS)
         lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")
     return all_reproduced
-
-
-def _pct(value: float | None) -> str:
-    return "n/a" if value is None else f"{100 * value:.1f}"

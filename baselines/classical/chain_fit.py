@@ -64,7 +64,7 @@ class LabelledFrames:
         ``[P]`` SAR value of every CFAR point (NaN outside every image).
     on_car : numpy.ndarray
         ``[P]`` bool: the point lies inside a labelled box (moved to the cube's time) grown by
-        :data:`zendar_dataset.fidelity.ON_CAR_MARGIN_M`.
+        :data:`zendar_dataset.detection.boxes.ON_CAR_MARGIN_M`.
     """
 
     points: dict[str, FramePoints]

@@ -50,7 +50,7 @@ from zendar_baselines.cnn.checkpoints import (
     unwrap_model,
 )
 from zendar_baselines.code_version import code_version
-from zendar_baselines.bench.configs import Schedule
+from zendar_baselines.cnn.schedule import Schedule
 from zendar_baselines.cnn.mask_frames import MaskFrames
 from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 

@@ -1,4 +1,6 @@
-"""A versioned side store of automatic labels, next to (never inside) the dataset it labels.
+"""A versioned side store of dynamic-object masks, next to (never inside) the dataset it labels: the
+automatic labels, or the manual-label masks of the labelled part (the same format; its errors call it
+an "auto-label store" either way).
 
 Layout of the store directory::
 
