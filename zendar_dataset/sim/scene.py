@@ -28,7 +28,7 @@ from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
 from zendar_dataset.sim.raycast import line_of_sight
 from zendar_dataset.sim.rotate import compose, rotate, unrotate
-from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m, sar_waveform
+from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, pulse_spacing_m, sar_waveform
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
 from zendar_dataset.sim.world import (
@@ -204,8 +204,7 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     corner_sensor = unrotate(mount.rotation, geometry.corners_ego - mount.translation)
     r_lo, r_hi = 0.0, float(np.linalg.norm(corner_sensor, axis=1).max()) + 3.0
     params = sar_waveform(ego_model.radar_params(profile), profile.sar_bandwidth_hz, r_hi)
-    boresight_from_track = float(np.arctan2(mount.rotation[1, 0], mount.rotation[0, 0]))
-    spacing = nyquist_spacing_m(params.wavelength_m, boresight_from_track)
+    spacing = pulse_spacing_m(params)
     ego = truth.ego
     distance = np.concatenate([[0.0], np.cumsum(0.5 * (ego.speed_mps[1:] + ego.speed_mps[:-1]) * np.diff(ego.time_s))])
     t = aperture_times(ego.time_s, distance, t_center_s, profile.sar_aperture_m, spacing, params.chirp_interval_s)
