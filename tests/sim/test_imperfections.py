@@ -167,7 +167,9 @@ def test_moving_car_defocuses_and_shifts_in_sar_as_its_speed_ratio_grows():
     assert 0.3 < shifts[1] < shifts[2]
     assert shifts[2] > 0.6
     assert peaks[0] > peaks[1] > peaks[2]
-    assert peaks[2] < peaks[0] / 2.5
+    # More than 3 dB lost at 40 % of the ego speed (the Hann taper weights the aperture's middle, where
+    # the car's uncompensated phase strays least, so it keeps more peak than uniform weights did).
+    assert peaks[2] < peaks[0] / 2
 
 
 def _doa_bias(errors, angles):

@@ -88,3 +88,14 @@ def test_no_grating_lobe_anywhere_on_the_range_circle_behind_the_radar():
     near_lobe = np.abs(np.abs(angle_deg) - lobe_deg) < 2.0
     assert level_db[near_lobe].max() > -10.0
 
+
+def test_a_point_leaves_no_ring_on_its_range_circle():
+    # The simulated image (uniform pulses, Hann taper along the aperture): away from the target and its
+    # left-right mirror across the track (same range and angle to the track, the ambiguity of a
+    # straight aperture), the range circle stays 50 dB under the peak.
+    spacing = pulse_spacing_m(PARAMS)
+    n = int(PROFILE.sar_aperture_m / spacing) + 1
+    level_db, angle_deg = _ring((np.arange(n) - (n - 1) / 2) * spacing)
+    away = (np.abs(angle_deg - TARGET_DEG) > 10.0) & (np.abs(angle_deg + TARGET_DEG) > 10.0)
+    assert away.sum() > 1000
+    assert level_db[away].max() <= -50.0

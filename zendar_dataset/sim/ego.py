@@ -24,6 +24,7 @@ from zendar_dataset.radar.fmcw import FmcwParams
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd
 from zendar_dataset.sim.rotate import compose, rotate
+from zendar_dataset.sim.sar_formation import AZIMUTH_WINDOW
 from zendar_dataset.sim.trajectory import Trajectory
 
 TRACKLOG_RATE_HZ = 100.0
@@ -125,6 +126,7 @@ def calibration(profile: SimProfile) -> dict:
                 doppler_window="hann",
                 fov_azimuth_deg=RADAR_FOV_AZIMUTH_DEG,
                 sar_bandwidth_hz=profile.sar_bandwidth_hz,
+                sar_azimuth_window=AZIMUTH_WINDOW,
             )
         elif name == CAMERA:
             k, distortion = camera_intrinsics(profile)

@@ -38,6 +38,8 @@ from zendar_dataset.sar.grid import ImageGrid
 from zendar_dataset.sim.rotate import rotate
 
 MIN_PULSES = 8
+# The slow-time taper of every simulated image (recorded in the calibration as sar_azimuth_window).
+AZIMUTH_WINDOW = "hann"
 # Pulses sample the static band 10 % finer than its Nyquist rate.
 NYQUIST_MARGIN = 1.1
 
@@ -214,8 +216,9 @@ def form_image(
 ) -> np.ndarray:
     """Backproject raw-DFT range profiles ``[P, N]`` from phase centres ``[P, 3]`` onto ``grid``.
 
-    The profiles are normalised by the window sum, so a point scatterer of
-    per-sample amplitude ``a`` seen by ``P`` pulses peaks near ``a * P``.
+    The pulses are tapered along the aperture by :data:`AZIMUTH_WINDOW` and the profiles are
+    normalised by the range window's sum, so a point scatterer of per-sample amplitude ``a``
+    peaks near ``a`` times the sum of the azimuth weights (``a * P / 2`` for Hann).
     ``device`` ``None`` or ``"cpu"`` uses the numba kernel; a CUDA device (``"cuda"``) the
     torch backend there, which computes the same float32 sum (equal to rounding).
     Returns complex64 ``[H, W]`` (numpy).
@@ -224,5 +227,6 @@ def form_image(
     scale = 1.0 / float(np.sum(window_values("hann", params.n_samples)))
     return backproject(
         prepared * np.float32(scale), phase_centers, grid, range_bin_m=bin_m, center_frequency_hz=frequency,
-        backend="numba" if device in (None, "cpu") else "torch", device=None if device == "cpu" else device,
+        azimuth_window=AZIMUTH_WINDOW, backend="numba" if device in (None, "cpu") else "torch",
+        device=None if device == "cpu" else device,
     )
