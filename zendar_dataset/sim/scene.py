@@ -228,26 +228,27 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     noise = thermal_noise(rng, (t.shape[0], params.n_samples, 1), front_end.noise_power_w(params))
     profiles = profiles + range_profiles(noise, workers=1)[..., 0]
     # Backprojection uses the written (noisy) tracklog, in the scene's ENU frame.
-    stamps = truth.start_ns + np.rint(t * 1e9).astype(np.int64)
-    imu_position, imu_attitude = tracklog.at(stamps)
-    enu_r_ecef = truth.enu.ecef_R_enu.T
-    imu_r = compose(enu_r_ecef, quat_wxyz_to_matrix(imu_attitude))  # [P, 3, 3] IMU -> ENU
-    imu_t = truth.enu.ecef_to_enu(imu_position)
-    ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
-    ego_r = compose(imu_r, ego_from_imu.rotation.T)
-    ego_t = imu_t - rotate(ego_r, ego_from_imu.translation)
+    ego_r, ego_t = ego_poses_from_tracklog(truth, tracklog, t)
     phase_center_ego = mount.translation + rotate(mount.rotation, receiver / 2.0)
     phase_centers = ego_t + rotate(ego_r, phase_center_ego)
-    center_stamp = truth.start_ns + int(round(t_center_s * 1e9))
-    c_position, c_attitude = tracklog.at(center_stamp)
-    c_r = compose(compose(enu_r_ecef, quat_wxyz_to_matrix(c_attitude[0])), ego_from_imu.rotation.T)
-    c_t = truth.enu.ecef_to_enu(c_position[0]) - rotate(c_r, ego_from_imu.translation)
+    c_r, c_t = ego_poses_from_tracklog(truth, tracklog, np.array([t_center_s]))
     # Keep the image plane level: only the yaw of the (noisy) ego pose orients it.
-    yaw = np.arctan2(c_r[1, 0], c_r[0, 0])
+    yaw = np.arctan2(c_r[0, 1, 0], c_r[0, 0, 0])
     level = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
-    grid = geometry.grid_enu(level, c_t)
+    grid = geometry.grid_enu(level, c_t[0])
     image = form_image(params, profiles, phase_centers, grid, device)
     return image, grid.transformed(truth.enu.ecef_T_enu), (float(t[0]), float(t[-1]))
+
+
+def ego_poses_from_tracklog(truth: SceneTruth, tracklog: PoseInterpolator, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ego poses ``enu_T_ego`` at scene times ``t_s`` ``[P]`` as a tracklog gives them (interpolated, through
+    the IMU's mount): rotations ``[P, 3, 3]`` and translations ``[P, 3]`` in the scene's ENU frame."""
+    stamps = truth.start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
+    imu_position, imu_attitude = tracklog.at(stamps)
+    imu_r = compose(truth.enu.ecef_R_enu.T, quat_wxyz_to_matrix(imu_attitude))  # [P, 3, 3] IMU -> ENU
+    ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
+    ego_r = compose(imu_r, ego_from_imu.rotation.T)
+    return ego_r, truth.enu.ecef_to_enu(imu_position) - rotate(ego_r, ego_from_imu.translation)
 
 
 def sar_footprint(profile: SimProfile, sensor: str) -> SarGeometry:
@@ -309,7 +310,8 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
         rng = stream_rng(seed, scene_index, f"sar_{sensor}")
         for t in sar_times:
             image, grid, (t0, t1) = simulate_sar(truth, profile, sensor, t, rng, tracklog, sar_device)
-            writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64))
+            writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64),
+                              ego_stopped=ego_model.stood_still(truth.ego, t0, t1))
     rng = stream_rng(seed, scene_index, "lidar")
     returns_per_sweep = {}
     for t in lidar_times:
