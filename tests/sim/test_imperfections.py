@@ -47,9 +47,9 @@ def test_clutter_amplitudes_follow_the_weibull_law_not_rayleigh():
     road = Road.from_curvature(-10.0, 200.0, lambda s: np.full_like(s, 1.0 / 80.0))
     clutter = road_clutter(np.random.default_rng(3), road, 0.0, 150.0, (-4.0, 8.0), settings)
     cell_m2 = settings.clutter_spacing_m**2
-    amplitude = np.sqrt(clutter.rcs_m2 / (10 ** (settings.clutter_sigma0_db / 10) * cell_m2))
+    amplitude = np.sqrt(clutter.rcs_m2 / (10 ** (settings.clutter_gamma_db / 10) * cell_m2))
     k = settings.clutter_weibull_shape
-    # E[a^2] = scale^2 Gamma(1 + 2/k) = 1 (the mean RCS is sigma0 times the cell area).
+    # E[a^2] = scale^2 Gamma(1 + 2/k) = 1 (the mean RCS at normal view is gamma times the cell area).
     weibull = scipy.stats.weibull_min(k, scale=1.0 / math.sqrt(math.gamma(1.0 + 2.0 / k)))
     assert scipy.stats.kstest(amplitude, weibull.cdf).pvalue > 0.01
     rayleigh = scipy.stats.rayleigh(scale=1.0 / math.sqrt(2.0))  # also E[a^2] = 1

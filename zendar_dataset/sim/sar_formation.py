@@ -74,11 +74,50 @@ def aperture_times(
         return t_center_s + (np.arange(MIN_PULSES) - MIN_PULSES / 2) * chirp_interval_s
     n = int(np.floor((d_hi - d_lo) / spacing_m + 1e-9)) + 1
     targets = 0.5 * (d_lo + d_hi) + (np.arange(n) - (n - 1) / 2) * spacing_m
-    # The first time each distance is reached (the distance is flat while the ego stands).
-    after = np.clip(np.searchsorted(distance_m, targets, side="left"), 1, distance_m.shape[0] - 1)
+    return _first_times(time_s, distance_m, targets)
+
+
+def _first_times(time_s: np.ndarray, distance_m: np.ndarray, targets_m: np.ndarray) -> np.ndarray:
+    """The first time each distance is reached (the distance is flat while the ego stands)."""
+    after = np.clip(np.searchsorted(distance_m, targets_m, side="left"), 1, distance_m.shape[0] - 1)
     d0, d1 = distance_m[after - 1], distance_m[after]
-    fraction = np.clip((targets - d0) / np.maximum(d1 - d0, 1e-300), 0.0, 1.0)
+    fraction = np.clip((targets_m - d0) / np.maximum(d1 - d0, 1e-300), 0.0, 1.0)
     return time_s[after - 1] + fraction * (time_s[after] - time_s[after - 1])
+
+
+def chirps_per_pulse(time_s: np.ndarray, distance_m: np.ndarray, pulse_times_s: np.ndarray, spacing_m: float,
+                     chirp_interval_s: float) -> np.ndarray:
+    """Chirps ``[P]`` each pulse presums: those sent while the ego is within half a spacing of its position.
+
+    A processor integrates every chirp by presumming: it low-pass filters the chirp train in slow
+    time to the band of static returns and resamples it at the pulses' positions, so each pulse
+    carries the chirps of its stretch of track (more while the ego is slow, all of a stop's),
+    and the thermal noise falls by their number. Single chirps (``aperture_times``' burst when the
+    ego does not move): 1 each.
+    """
+    along = np.interp(pulse_times_s, time_s, distance_m)
+    if pulse_times_s.shape[0] < 2 or np.ptp(along) < spacing_m:
+        return np.ones(pulse_times_s.shape[0])
+    dwell = (_first_times(time_s, distance_m, along + spacing_m / 2)
+             - _first_times(time_s, distance_m, along - spacing_m / 2))
+    return np.maximum(dwell / chirp_interval_s, 1.0)
+
+
+def presum_factors(doppler_hz: np.ndarray, pulse_times_s: np.ndarray, ego_speed_mps: np.ndarray, spacing_m: float,
+                   chirp_interval_s: float) -> np.ndarray:
+    """What presumming does to each return ``[S, P]`` (complex): 1 for every static one, 0 or a phase for movers.
+
+    The chirp train samples a return of Doppler ``doppler_hz`` ``[S, P]`` at ``1 / T_c``, folding
+    it into ``[-1 / (2 T_c), 1 / (2 T_c))``; the presum filter passes the band its pulses sample,
+    ``|f| <= v / (2 spacing)`` (``v`` the ego speed at each pulse ``[P]``; static returns lie inside,
+    ``|f| <= 2 v / lambda``), and removes the rest; a folded return that passes carries its folded
+    frequency, so its phase at the pulse time ``t`` turns by ``-2 pi k t / T_c`` (``k`` the fold).
+    """
+    folds = np.rint(doppler_hz * chirp_interval_s)
+    folded = doppler_hz - folds / chirp_interval_s
+    passed = np.abs(folded) <= (np.asarray(ego_speed_mps) / (2.0 * spacing_m))[None, :]
+    turns = np.mod(folds * (np.asarray(pulse_times_s) / chirp_interval_s)[None, :], 1.0)
+    return np.where(passed, np.exp(-2j * np.pi * turns), 0.0)
 
 
 def sar_waveform(cube_params: FmcwParams, bandwidth_hz: float, max_range_m: float) -> FmcwParams:
