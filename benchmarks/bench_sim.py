@@ -34,7 +34,7 @@ from zendar_dataset.sim.imperfections import Imperfections
 from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import get_profile
 from zendar_dataset.sim.radar_model import synthesize_cube
-from zendar_dataset.sim.sar_formation import nyquist_spacing_m
+from zendar_dataset.sim.sar_formation import pulse_spacing_m, sar_waveform
 from zendar_dataset.sim.scene import build_scene, simulate_cube, simulate_sar, stream_rng
 
 
@@ -111,7 +111,8 @@ def bench_frames(names: tuple[str, ...]) -> None:
             costs[f"cube {label}"], _, _ = _timed(lambda: simulate_cube(truth, prof, "front_left", 0.55, rng), repeats)
             costs[f"sar {label}"], _, image = _timed(
                 lambda: simulate_sar(truth, prof, "front_left", 0.55, rng, tracklog), repeats)
-        pulses = int(profile.sar_aperture_m / nyquist_spacing_m(ego_model.radar_params(profile).wavelength_m, np.pi / 4))
+        waveform = sar_waveform(ego_model.radar_params(profile), profile.sar_bandwidth_hz, profile.sar_coverage_m)
+        pulses = int(profile.sar_aperture_m / pulse_spacing_m(waveform)) + 1
         frames = profile.scene_duration_s * profile.radar_rate_hz * len(ego_model.RADARS)
         scene_min = frames * (costs["cube on"] + costs["sar on"]) / 60
         print(f"{name:>8} {image[0].size:11d} {pulses:7d} {costs['cube on']:10.2f} {costs['cube off']:11.2f} "

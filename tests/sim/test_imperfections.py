@@ -47,9 +47,9 @@ def test_clutter_amplitudes_follow_the_weibull_law_not_rayleigh():
     road = Road.from_curvature(-10.0, 200.0, lambda s: np.full_like(s, 1.0 / 80.0))
     clutter = road_clutter(np.random.default_rng(3), road, 0.0, 150.0, (-4.0, 8.0), settings)
     cell_m2 = settings.clutter_spacing_m**2
-    amplitude = np.sqrt(clutter.rcs_m2 / (10 ** (settings.clutter_sigma0_db / 10) * cell_m2))
+    amplitude = np.sqrt(clutter.rcs_m2 / (10 ** (settings.clutter_gamma_db / 10) * cell_m2))
     k = settings.clutter_weibull_shape
-    # E[a^2] = scale^2 Gamma(1 + 2/k) = 1 (the mean RCS is sigma0 times the cell area).
+    # E[a^2] = scale^2 Gamma(1 + 2/k) = 1 (the mean RCS at normal view is gamma times the cell area).
     weibull = scipy.stats.weibull_min(k, scale=1.0 / math.sqrt(math.gamma(1.0 + 2.0 / k)))
     assert scipy.stats.kstest(amplitude, weibull.cdf).pvalue > 0.01
     rayleigh = scipy.stats.rayleigh(scale=1.0 / math.sqrt(2.0))  # also E[a^2] = 1
@@ -133,8 +133,10 @@ def test_moving_car_defocuses_and_shifts_in_sar_as_its_speed_ratio_grows():
     rotation, position = _sensor_frame(truth, "front_left", t)
     ego_speed = float(np.linalg.norm(truth.ego.velocity_at(np.array(t))))
     assert ego_speed > 3.0
-    written = truth.tracklog_written
-    tracklog = PoseInterpolator(written.timestamp_ns, written.position_ecef, written.attitude_wxyz)
+    # The true poses: only the car's motion moves its image (a defocused car's image is a speckle of its
+    # 15 scatterers, whose pattern millimetres of navigation error already reshuffle).
+    exact = truth.tracklog_truth
+    tracklog = PoseInterpolator(exact.timestamp_ns, exact.position_ecef, exact.attitude_wxyz)
     center_sensor = np.array([7.0, 2.0, 0.0])
     center = rotation @ center_sensor + position * np.array([1, 1, 0])
     # An oncoming car: seen 45 deg off the track, it closes in on the radar (which shifts it in azimuth)
@@ -142,7 +144,7 @@ def test_moving_car_defocuses_and_shifts_in_sar_as_its_speed_ratio_grows():
     heading = float(truth.ego.yaw_at(np.array(t))) + math.pi
     size = np.array([4.5, 1.8, 1.5])
     body = car_scatterers(np.random.default_rng(1), size)
-    peaks, centroids = [], []
+    peaks, brightest = [], []
     for ratio in (0.0, 0.15, 0.4):
         speed = ratio * ego_speed
         start = center - (t + 2.0) * speed * np.array([math.cos(heading), math.sin(heading), 0.0])
@@ -155,19 +157,17 @@ def test_moving_car_defocuses_and_shifts_in_sar_as_its_speed_ratio_grows():
         # track at the image plane's height cannot tell the two sides apart).
         rows, cols = np.indices(power.shape)
         near = np.hypot(rows - i[0], cols - j[0]) * profile.sar_pixel_m < 5.0
-        strong = near & (power > power[near].max() / 100)
-        ii, jj = np.nonzero(strong)
-        weights = power[strong]
-        centroid = np.array([np.sum(ii * weights), np.sum(jj * weights)]) / weights.sum()
+        brightest.append(np.array(np.unravel_index(np.argmax(np.where(near, power, 0.0)), power.shape), float))
         peaks.append(power.max())
-        centroids.append(centroid)
-    # Against the frozen car's image (its brightest parts are the near end, not the box centre).
-    shifts = [float(np.hypot(*(c - centroids[0]))) * profile.sar_pixel_m for c in centroids]
+    # Against the frozen car's image (its brightest part is the near end, not the box centre).
+    shifts = [float(np.hypot(*(b - brightest[0]))) * profile.sar_pixel_m for b in brightest]
     # A radial speed v_r moves the image along track by about R v_r / v_ego (R ~ 7.3 m here).
-    assert 0.3 < shifts[1] < shifts[2]
-    assert shifts[2] > 0.6
+    assert 2 * profile.sar_pixel_m < shifts[1] < shifts[2]
+    assert shifts[2] > 6 * profile.sar_pixel_m
     assert peaks[0] > peaks[1] > peaks[2]
-    assert peaks[2] < peaks[0] / 2.5
+    # More than 3 dB lost at 40 % of the ego speed (the Hann taper weights the aperture's middle, where
+    # the car's uncompensated phase strays least, so it keeps more peak than uniform weights did).
+    assert peaks[2] < peaks[0] / 2
 
 
 def _doa_bias(errors, angles):

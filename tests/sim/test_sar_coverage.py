@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.calibration import Calibration
 from zendar_dataset.geometry.poses import PoseInterpolator
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
@@ -124,3 +125,16 @@ def test_paper_sar_resolves_4_cm_in_range():
     # Hann window: 3-dB width 1.44 range bins of c / (2 B) = 4 cm (0.18 m bins would give 26 cm).
     assert width_m == pytest.approx(1.44 * SPEED_OF_LIGHT_MPS / (2 * paper.sar_bandwidth_hz), rel=0.2)
     assert abs(int(np.argmax(cut)) - 40) <= 1
+
+
+def test_the_azimuth_window_is_recorded_in_the_calibration_and_optional_in_the_format():
+    calibration = ego_model.calibration(get_profile("demo"))
+    for sensor in ego_model.RADARS:
+        assert calibration["sensors"][sensor]["sar_azimuth_window"] == "hann"
+    again = Calibration.from_json(Calibration.from_json(calibration).to_json()).to_json()
+    assert again["sensors"]["front_right"]["sar_azimuth_window"] == "hann"
+    del calibration["sensors"]["front_right"]["sar_azimuth_window"]
+    assert "sar_azimuth_window" not in Calibration.from_json(calibration).to_json()["sensors"]["front_right"]
+    calibration["sensors"]["front_right"]["sar_azimuth_window"] = 3
+    with pytest.raises(ZendarFormatError, match="sar_azimuth_window"):
+        Calibration.from_json(calibration)

@@ -3,12 +3,14 @@
 import numpy as np
 import pytest
 
+from tests.sar.point_target import half_power_width
 from zendar_dataset.radar.fmcw import SPEED_OF_LIGHT_MPS
+from zendar_dataset.sar.aperture import cross_range_resolution_m
 from zendar_dataset.sar.grid import ImageGrid
 from zendar_dataset.sim.ego import radar_params
 from zendar_dataset.sim.profiles import get_profile
 from zendar_dataset.sim.radar_model import synthesize_range_profiles
-from zendar_dataset.sim.sar_formation import form_image
+from zendar_dataset.sim.sar_formation import AZIMUTH_WINDOW, form_image, profiles_for_backprojection
 
 PARAMS = radar_params(get_profile("paper"))
 EGO_SPEED = 10.0
@@ -33,18 +35,19 @@ def _image(target, target_velocity, aperture_m, pixel_m, shape):
 
 def test_static_point_focuses_on_its_pixel_with_the_expected_azimuth_resolution():
     target = np.array([0.003, 10.0, 0.0])
-    # Rows (along track) at 5 mm to measure the azimuth lobe; columns (range) at the paper's 4 cm.
-    aperture, pixel = 0.2, 0.005
-    image, grid = _image(target, np.zeros(3), aperture, (pixel, 0.04), (81, 21))
+    # Rows (along track) at 1 mm to measure the azimuth lobe; columns (range) at the paper's 4 cm.
+    aperture, pixel = 0.2, 0.001
+    image, grid = _image(target, np.zeros(3), aperture, (pixel, 0.04), (401, 21))
     i, j = np.unravel_index(np.argmax(image), image.shape)
     ti, tj, _ = grid.world_to_pixel(target)
     assert abs(i - ti) <= 1 and abs(j - tj) <= 1
-    row = image[:, j] ** 2
-    half = row.max() / 2
-    above = np.flatnonzero(row > half)
-    width_m = (above[-1] - above[0] + 1) * pixel
-    expected = SPEED_OF_LIGHT_MPS / (2 * PARAMS.center_frequency_hz * aperture * 1.0) * 10.0  # theta = 90 deg
-    assert width_m == pytest.approx(expected, rel=0.2)
+    # The images are formed at the sweep's mid frequency, tapered by the Hann window (theta = 90 deg).
+    _, _, frequency = profiles_for_backprojection(PARAMS, np.zeros((1, PARAMS.n_samples), np.complex64))
+    spacing = PARAMS.wavelength_m / 4
+    length = (np.arange(-aperture / 2, aperture / 2 + 1e-9, spacing).size - 1) * spacing
+    expected = cross_range_resolution_m(10.0, SPEED_OF_LIGHT_MPS / frequency, length, np.pi / 2, AZIMUTH_WINDOW)
+    assert AZIMUTH_WINDOW == "hann"
+    assert half_power_width(image[:, j], pixel) == pytest.approx(expected, rel=0.01)
 
 
 @pytest.mark.slow

@@ -91,6 +91,10 @@ class RadarCalibration(SensorCalibration):
     sar_bandwidth_hz : float or None
         Optional: swept bandwidth of the waveform this radar's SAR images are formed from, Hz (SAR
         range resolution ``c / (2 sar_bandwidth_hz)``); absent when it is ``bandwidth_hz``.
+    sar_azimuth_window : str or None
+        Optional: the slow-time taper this radar's SAR images were formed with (``"rectangular"``,
+        ``"hann"``: :data:`zendar_dataset.sar.aperture.AZIMUTH_WINDOWS`); it sets their cross-range
+        resolution. Absent: not recorded.
     """
 
     center_frequency_hz: float
@@ -100,6 +104,7 @@ class RadarCalibration(SensorCalibration):
     rx_positions_m: np.ndarray
     fov_azimuth_deg: float | None = None
     sar_bandwidth_hz: float | None = None
+    sar_azimuth_window: str | None = None
 
     def _check(self, name: str = "radar") -> list[str]:
         problems = super()._check(name)
@@ -128,11 +133,14 @@ class RadarCalibration(SensorCalibration):
                 problems.append(f"{name}.sar_bandwidth_hz: expected a positive number, found {sar_bandwidth!r}")
             else:
                 self.sar_bandwidth_hz = float(sar_bandwidth)
+        window = self.sar_azimuth_window
+        if window is not None and not (isinstance(window, str) and window):
+            problems.append(f"{name}.sar_azimuth_window: expected a window name (a non-empty string), found {window!r}")
         return problems
 
     def to_json(self) -> dict[str, Any]:
         out = super().to_json()
-        for key in ("fov_azimuth_deg", "sar_bandwidth_hz"):
+        for key in ("fov_azimuth_deg", "sar_bandwidth_hz", "sar_azimuth_window"):
             if out.get(key) is None:
                 out.pop(key, None)
         return out
@@ -173,7 +181,7 @@ class CameraCalibration(SensorCalibration):
 _RADAR_KEYS = {f.name for f in fields(RadarCalibration)}
 _CAMERA_KEYS = {f.name for f in fields(CameraCalibration)}
 _SENSOR_KEYS = {f.name for f in fields(SensorCalibration)}
-_OPTIONAL_KEYS = {"fov_azimuth_deg", "sar_bandwidth_hz"}
+_OPTIONAL_KEYS = {"fov_azimuth_deg", "sar_bandwidth_hz", "sar_azimuth_window"}
 
 
 def _sensor_from_json(name: str, entry: Any, problems: list[str]) -> SensorCalibration | None:

@@ -19,13 +19,13 @@ from zendar_dataset.format.schema import (
     CALIBRATION_GROUP,
     ENU_ORIGIN_KEYS,
     EXTRA_SENSOR_GROUPS,
-    LABEL_OPTIONAL_FIELDS,
     LABELS,
     SENSOR_GROUPS,
     TIME_REFERENCE,
     TRACKLOG,
     ArraySpec,
     expected_first_dim,
+    optional_specs,
     stream_specs,
 )
 
@@ -146,13 +146,12 @@ def check_stream(root: Any, scene: str, stream: str, problems: list[str], checks
         node = check_array(root, scene, stream, spec, n, problems, checksummed)
         if node is not None:
             arrays[spec.name] = node
-    if stream == LABELS:
-        for spec in LABEL_OPTIONAL_FIELDS:
-            # An optional field with unreadable metadata is one problem (noted here), not a missing array.
-            if get_node(root, scene, f"{stream}/{spec.name}", problems) is not None:
-                node = check_array(root, scene, stream, spec, n, problems, checksummed)
-                if node is not None:
-                    arrays[spec.name] = node
+    for spec in optional_specs(stream):
+        # An optional field with unreadable metadata is one problem (noted here), not a missing array.
+        if get_node(root, scene, f"{stream}/{spec.name}", problems) is not None:
+            node = check_array(root, scene, stream, spec, n, problems, checksummed)
+            if node is not None:
+                arrays[spec.name] = node
     return arrays
 
 

@@ -104,6 +104,9 @@ LABEL_FIELDS: tuple[ArraySpec, ...] = (
     _spec("track_id", "int64", "N"),
 )
 LABEL_FIELD_NAMES = tuple(spec.name for spec in LABEL_FIELDS)
+# Optional per-frame arrays of a SAR stream (a backward-compatible addition): ego_stopped marks the
+# frames whose synthetic aperture includes a moment when the ego stood still.
+SAR_OPTIONAL_ARRAYS: tuple[ArraySpec, ...] = (_spec("ego_stopped", "bool", "N"),)
 # Optional label fields (a backward-compatible addition): how visible each car is, as nuScenes'
 # num_radar_pts / num_lidar_pts.  Written when known, passed through to ground truth.
 LABEL_OPTIONAL_FIELDS: tuple[ArraySpec, ...] = (
@@ -113,6 +116,13 @@ LABEL_OPTIONAL_FIELDS: tuple[ArraySpec, ...] = (
 LABEL_OPTIONAL_FIELD_NAMES = tuple(spec.name for spec in LABEL_OPTIONAL_FIELDS)
 # Fields of one car in ground truth and predictions (everything but the frame's timestamp).
 CAR_FIELDS = tuple(name for name in LABEL_FIELD_NAMES if name != "timestamp_ns")
+
+
+def optional_specs(stream: str) -> tuple[ArraySpec, ...]:
+    """The optional arrays of a stream path (checked when present): label fields, SAR frame flags."""
+    if stream == LABELS:
+        return LABEL_OPTIONAL_FIELDS
+    return SAR_OPTIONAL_ARRAYS if stream.split("/", 1)[0] == "sar" else ()
 
 
 def stream_specs(stream: str) -> tuple[ArraySpec, ...]:

@@ -19,7 +19,7 @@ from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format import checksums, stores
 from zendar_dataset.format.checks import check_scene_metadata
 from zendar_dataset.format.reader import check_dataset_json, read_dataset_json
-from zendar_dataset.format.schema import DATASET_JSON, DETECTIONS, LABEL_OPTIONAL_FIELDS, LABELS, TRACKLOG, stream_specs
+from zendar_dataset.format.schema import DATASET_JSON, DETECTIONS, LABEL_OPTIONAL_FIELDS, LABELS, TRACKLOG, optional_specs, stream_specs
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _KEEP_BYTES = 64 * 2**20  # arrays up to this size are kept in memory for the value checks
@@ -110,7 +110,7 @@ def _check_stream_data(
     """Read every array of ``stream`` whose metadata passed (``arrays``: path -> array) and check its values."""
     group = stream.split("/", 1)[0]
     values: dict[str, np.ndarray] = {}
-    for spec in (*stream_specs(stream), *(LABEL_OPTIONAL_FIELDS if stream == LABELS else ())):
+    for spec in (*stream_specs(stream), *optional_specs(stream)):
         path = f"{stream}/{spec.name}"
         node = arrays.get(path)
         if node is None:

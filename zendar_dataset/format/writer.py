@@ -266,13 +266,24 @@ class SceneWriter:
         di_ecef: Any,
         dj_ecef: Any,
         aperture_ns: Any,
+        ego_stopped: bool | None = None,
     ) -> None:
         """Append a SAR image ``[H, W]`` complex64; pixel (i, j) is at origin + i·di + j·dj (ECEF, m).
 
-        ``aperture_ns`` is the (start, end) GPS time of the synthetic aperture.
+        ``aperture_ns`` is the (start, end) GPS time of the synthetic aperture. ``ego_stopped``
+        (optional, docs/format.md): whether the ego stood still at some moment of the aperture;
+        given for every frame of the stream or for none.
         """
         stream = self._stream("sar", sensor, RadarCalibration)
         where = f"{self.scene_id}: {stream.path}"
+        if stream.timestamps and ("ego_stopped" in stream.small) != (ego_stopped is not None):
+            raise ZendarFormatError(
+                f"{where}/ego_stopped: expected a value for every frame of the stream or for none, found "
+                f"{'none' if ego_stopped is None else 'one'} after {len(stream.timestamps)} frames "
+                f"{'with' if 'ego_stopped' in stream.small else 'without'}"
+            )
+        if ego_stopped is not None and not isinstance(ego_stopped, (bool, np.bool_)):
+            raise ZendarFormatError(f"{where}/ego_stopped: expected a bool, found {ego_stopped!r}")
         image = _as(image, "complex64", (None, None), f"{where}/image")
         vectors = {
             name: _as(value, "float64", (3,), f"{where}/{name}")
@@ -287,6 +298,8 @@ class SceneWriter:
         self._append_frame(stream, timestamp_ns, "image", image, stores.RAW)
         for name, vector in (*vectors.items(), ("aperture_ns", aperture)):
             stream.small.setdefault(name, []).append(vector)
+        if ego_stopped is not None:
+            stream.small.setdefault("ego_stopped", []).append(np.bool_(ego_stopped))
 
     def append_camera(self, sensor: str, timestamp_ns: int, image: np.ndarray) -> None:
         """Append a camera image ``[H, W, 3]`` uint8 (RGB)."""

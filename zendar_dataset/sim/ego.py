@@ -3,18 +3,23 @@
 The true ego pose comes from the ego's :class:`~zendar_dataset.sim.trajectory.Trajectory`
 (flat ground, no roll or pitch).  The tracklog samples the IMU pose at 100 Hz
 and converts it to ECEF through pyproj (``LocalENU``).  The *written* tracklog
-carries GPS/IMU-grade error: a slowly wandering bias (first-order Gauss-Markov,
-a few centimetres and a few hundredths of a degree, correlation time tens of
-seconds, as an INS blending GNSS) plus a small white jitter.  Over a SAR
-aperture (~0.1-1 s) the bias is nearly constant, so images stay focused but are
-slightly misplaced, while the jitter costs some focus, as the paper notes.
+carries the error of a GNSS/INS solution (:class:`TracklogNoise`): centimetres
+of position error that wander over tens of seconds, driven through a velocity
+error by the IMU's accelerometer noise, so they are smooth over a synthetic
+aperture (hundredths of a millimetre from a straight line over 0.2 s); a few
+hundredths of a degree of attitude error driven by the gyros' noise; and
+zero-velocity updates that hold the position error while the ego stands.
+SAR images formed from it focus as from the truth and are misplaced by the
+position error, as on the real vehicle.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from scipy.spatial.transform import Rotation
 
 from zendar_dataset.geometry.geodesy import LocalENU
@@ -24,9 +29,13 @@ from zendar_dataset.radar.fmcw import FmcwParams
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd
 from zendar_dataset.sim.rotate import compose, rotate
+from zendar_dataset.sim.sar_formation import AZIMUTH_WINDOW
 from zendar_dataset.sim.trajectory import Trajectory
 
 TRACKLOG_RATE_HZ = 100.0
+# Below this speed the ego stands still: the navigation applies zero-velocity updates, and a SAR
+# frame whose aperture includes such a moment is marked ego_stopped (docs/format.md).
+STANDSTILL_MPS = 0.01
 RADARS = ("front_left", "front_right")
 LIDAR = "top"
 CAMERA = "front"
@@ -61,23 +70,42 @@ EGO_T_SENSOR: dict[str, SE3] = {
 
 @dataclass(frozen=True)
 class TracklogNoise:
-    """GPS/IMU error model of the written tracklog.
+    """Error model of the written tracklog: an RTK GNSS receiver blended with a tactical-grade IMU.
+
+    Position error, per ENU axis: a second-order Gauss-Markov process
+    ``e'' = -2 zeta omega e' - omega^2 e + w``, ``w`` the accelerometers' white noise (power
+    spectral density ``N^2``, ``N`` the velocity random walk) and ``omega`` set so that ``e``
+    keeps the GNSS's position accuracy ``sigma``: ``omega^3 = N^2 / (4 zeta sigma^2)``. The error
+    reaches the position only through the velocity error ``e'`` (standard deviation
+    ``N / sqrt(4 zeta omega)``, about 2 mm/s), so over a synthetic aperture it is nearly a straight
+    line. Attitude error, per axis: a first-order Gauss-Markov process of standard deviation
+    ``attitude_deg`` driven by the gyros' angle random walk. While the ego stands still
+    (:data:`STANDSTILL_MPS`) zero-velocity updates hold the position error. Parameters and
+    their sources: docs/simulator.md.
 
     Attributes
     ----------
-    position_bias_m, attitude_bias_deg : float
-        Standard deviation of the Gauss-Markov bias per axis.
-    correlation_s : float
-        Correlation time of the bias.
-    position_jitter_m, attitude_jitter_deg : float
-        Standard deviation of the white jitter per sample.
+    horizontal_position_m, vertical_position_m : float
+        Standard deviation of the position error per horizontal axis and vertically.
+    velocity_random_walk_mps_per_sqrt_h : float
+        The accelerometers' velocity random walk ``N``.
+    damping : float
+        ``zeta`` of the position error's second-order process.
+    attitude_deg : float
+        Standard deviation of the attitude error per axis.
+    angle_random_walk_deg_per_sqrt_h : float
+        The gyros' angle random walk.
+    zero_velocity_updates : bool
+        Hold the position error while the ego stands still.
     """
 
-    position_bias_m: float = 0.03
-    attitude_bias_deg: float = 0.05
-    correlation_s: float = 30.0
-    position_jitter_m: float = 0.0002
-    attitude_jitter_deg: float = 0.002
+    horizontal_position_m: float = 0.02
+    vertical_position_m: float = 0.04
+    velocity_random_walk_mps_per_sqrt_h: float = 0.07
+    damping: float = 1.0 / math.sqrt(2.0)
+    attitude_deg: float = 0.05
+    angle_random_walk_deg_per_sqrt_h: float = 0.15
+    zero_velocity_updates: bool = True
 
 
 def radar_params(profile: SimProfile) -> FmcwParams:
@@ -125,6 +153,7 @@ def calibration(profile: SimProfile) -> dict:
                 doppler_window="hann",
                 fov_azimuth_deg=RADAR_FOV_AZIMUTH_DEG,
                 sar_bandwidth_hz=profile.sar_bandwidth_hz,
+                sar_azimuth_window=AZIMUTH_WINDOW,
             )
         elif name == CAMERA:
             k, distortion = camera_intrinsics(profile)
@@ -160,11 +189,108 @@ def sensor_poses_enu(trajectory: Trajectory, sensor: str, t_s: np.ndarray) -> tu
     return compose(rotation, mount.rotation), translation + rotate(rotation, mount.translation)
 
 
-def _gauss_markov(rng: np.random.Generator, n: int, dims: int, sigma: float, correlation_s: float, dt: float) -> np.ndarray:
-    phi = np.exp(-dt / correlation_s)
-    drive = rng.standard_normal((n, dims)) * sigma * np.sqrt(1 - phi**2)
-    out = np.empty((n, dims))
-    out[0] = rng.standard_normal(dims) * sigma
+def stood_still(trajectory: Trajectory, t_start_s: float, t_end_s: float) -> bool:
+    """Whether the body stood still (speed below :data:`STANDSTILL_MPS`) at some moment of ``[t_start_s, t_end_s]``."""
+    inside = trajectory.time_s[(trajectory.time_s > t_start_s) & (trajectory.time_s < t_end_s)]
+    times = np.concatenate([[t_start_s, t_end_s], inside])
+    return bool(np.any(np.linalg.norm(trajectory.velocity_at(times), axis=-1) < STANDSTILL_MPS))
+
+
+# Zero-velocity updates: the velocity error the smoother is told while the ego stands (m/s, 1 sigma).
+ZERO_VELOCITY_NOISE_MPS = 1e-4
+
+
+def _position_error(rng: np.random.Generator, standing: np.ndarray, sigma_m: np.ndarray, noise: TracklogNoise,
+                    dt: float) -> np.ndarray:
+    """Position error ``[n, 3]`` at the tracklog samples: the second-order Gauss-Markov process of
+    :class:`TracklogNoise` from its stationary law, stepped exactly (Van Loan's matrix exponential).
+
+    Where ``standing`` ``[n]``, zero-velocity updates tell the navigation that its velocity error is
+    zero; a post-processed trajectory is smoothed forward and backward, so through the velocity error's
+    correlation (seconds) they also pin it near the stop. The draw is conditioned on them exactly
+    (Matheron's rule: subtract the Rauch-Tung-Striebel smoother's estimate given the draw's own
+    velocity errors at those samples), which holds the position error while the ego stands.
+    """
+    vrw = noise.velocity_random_walk_mps_per_sqrt_h / 60.0
+    zeta = noise.damping
+    n = standing.shape[0]
+    out = np.empty((n, 3))
+    drive = rng.standard_normal((n, 3, 2))
+    for axis, sigma in enumerate(sigma_m):
+        omega = (vrw**2 / (4.0 * zeta * sigma**2)) ** (1.0 / 3.0)
+        a = np.array([[0.0, 1.0], [-omega**2, -2.0 * zeta * omega]])
+        driven = np.zeros((2, 2))
+        driven[1, 1] = vrw**2
+        block = scipy.linalg.expm(np.block([[-a, driven], [np.zeros((2, 2)), a.T]]) * dt)
+        transition = tuple(block[2:, 2:].T.ravel().tolist())
+        (s00, _), (s10, s11) = np.linalg.cholesky(block[2:, 2:].T @ block[:2, 2:]).tolist()
+        t00, t01, t10, t11 = transition
+        prior = (sigma**2, 0.0, vrw**2 / (4.0 * zeta * omega))
+        # Scalar steps in a fixed order: no library-chosen reduction touches the written values.
+        e = np.empty(n)
+        v = np.empty(n)
+        e[0], v[0] = math.sqrt(prior[0]) * drive[0, axis, 0], math.sqrt(prior[2]) * drive[0, axis, 1]
+        for i in range(1, n):
+            d0, d1 = drive[i, axis]
+            e[i] = t00 * e[i - 1] + t01 * v[i - 1] + s00 * d0
+            v[i] = t10 * e[i - 1] + t11 * v[i - 1] + s10 * d0 + s11 * d1
+        if standing.any():
+            noise_q = (s00 * s00, s00 * s10, s10 * s10 + s11 * s11)
+            e -= _smoothed_position(np.where(standing, v, np.nan), transition, noise_q, prior)
+        out[:, axis] = e
+    return out
+
+
+def _smoothed_position(velocity: np.ndarray, transition: tuple, noise_q: tuple, prior: tuple) -> np.ndarray:
+    """Rauch-Tung-Striebel smoothed position ``[n]`` of the state (position, velocity) with transition
+    ``(t00, t01, t10, t11)``, process noise and prior covariances ``(c00, c01, c11)``, given the
+    velocity where ``velocity`` is not NaN (noise :data:`ZERO_VELOCITY_NOISE_MPS`)."""
+    t00, t01, t10, t11 = transition
+    r = ZERO_VELOCITY_NOISE_MPS**2
+    n = velocity.shape[0]
+    filtered = np.empty((n, 5))  # m0, m1, p00, p01, p11 after the update
+    predicted = np.empty((n, 5))
+    m0, m1, p00, p01, p11 = 0.0, 0.0, *prior
+    for k in range(n):
+        if k:
+            m0, m1 = t00 * m0 + t01 * m1, t10 * m0 + t11 * m1
+            a00, a01 = t00 * p00 + t01 * p01, t00 * p01 + t01 * p11
+            a10, a11 = t10 * p00 + t11 * p01, t10 * p01 + t11 * p11
+            p00 = a00 * t00 + a01 * t01 + noise_q[0]
+            p01 = a00 * t10 + a01 * t11 + noise_q[1]
+            p11 = a10 * t10 + a11 * t11 + noise_q[2]
+        predicted[k] = m0, m1, p00, p01, p11
+        if not math.isnan(velocity[k]):
+            gain0, gain1 = p01 / (p11 + r), p11 / (p11 + r)
+            residual = velocity[k] - m1
+            m0, m1 = m0 + gain0 * residual, m1 + gain1 * residual
+            p00, p01, p11 = p00 - gain0 * p01, p01 - gain0 * p11, p11 - gain1 * p11
+        filtered[k] = m0, m1, p00, p01, p11
+    smoothed = np.empty(n)
+    s0, s1 = filtered[n - 1, 0], filtered[n - 1, 1]
+    smoothed[n - 1] = s0
+    for k in range(n - 2, -1, -1):
+        f0, f1, p00, p01, p11 = filtered[k]
+        q0, q1, r00, r01, r11 = predicted[k + 1]
+        c00, c01 = p00 * t00 + p01 * t01, p00 * t10 + p01 * t11
+        c10, c11 = p01 * t00 + p11 * t01, p01 * t10 + p11 * t11
+        det = r00 * r11 - r01 * r01
+        i00, i01, i11 = r11 / det, -r01 / det, r00 / det
+        d0, d1 = s0 - q0, s1 - q1
+        s0 = f0 + (c00 * i00 + c01 * i01) * d0 + (c00 * i01 + c01 * i11) * d1
+        s1 = f1 + (c10 * i00 + c11 * i01) * d0 + (c10 * i01 + c11 * i11) * d1
+        smoothed[k] = s0
+    return smoothed
+
+
+def _attitude_error(rng: np.random.Generator, n: int, sigma_rad: float, random_walk_rad_per_sqrt_s: float,
+                    dt: float) -> np.ndarray:
+    """Attitude error ``[n, 3]`` (rotation vector): first-order Gauss-Markov of standard deviation
+    ``sigma_rad`` whose increments are the gyros' angle random walk (correlation ``2 sigma^2 / ARW^2``)."""
+    phi = math.exp(-dt * random_walk_rad_per_sqrt_s**2 / (2.0 * sigma_rad**2))
+    drive = rng.standard_normal((n, 3)) * sigma_rad * math.sqrt(1.0 - phi**2)
+    out = np.empty((n, 3))
+    out[0] = rng.standard_normal(3) * sigma_rad
     for i in range(1, n):
         out[i] = phi * out[i - 1] + drive[i]
     return out
@@ -201,11 +327,13 @@ def make_tracklogs(
         matrix_to_quat_wxyz(compose(ecef_r_enu, rotation)),
     )
     dt = 1.0 / TRACKLOG_RATE_HZ
-    n = t.shape[0]
-    position_error = _gauss_markov(rng, n, 3, noise.position_bias_m, noise.correlation_s, dt)
-    position_error += rng.standard_normal((n, 3)) * noise.position_jitter_m
-    angle_error = _gauss_markov(rng, n, 3, np.radians(noise.attitude_bias_deg), noise.correlation_s, dt)
-    angle_error += rng.standard_normal((n, 3)) * np.radians(noise.attitude_jitter_deg)
+    standing = np.linalg.norm(trajectory.velocity_at(t), axis=-1) < STANDSTILL_MPS
+    if not noise.zero_velocity_updates:
+        standing = np.zeros_like(standing)
+    sigma = np.array([noise.horizontal_position_m, noise.horizontal_position_m, noise.vertical_position_m])
+    position_error = _position_error(rng, standing, sigma, noise, dt)
+    angle_error = _attitude_error(rng, t.shape[0], math.radians(noise.attitude_deg),
+                                  math.radians(noise.angle_random_walk_deg_per_sqrt_h) / 60.0, dt)
     perturb = Rotation.from_rotvec(angle_error).as_matrix()
     noisy = Tracklog(
         truth.timestamp_ns,

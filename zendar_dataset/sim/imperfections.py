@@ -28,9 +28,10 @@ class Imperfections:
     Attributes
     ----------
     road_clutter : bool
-        Distributed scatterers on the road and sidewalks (:mod:`zendar_dataset.sim.clutter`).
-    clutter_sigma0_db : float
-        Mean backscatter coefficient of the ground at low grazing angles, dB m²/m².
+        Distributed scatterers on the ground from facade to facade: road, curbs, sidewalks
+        (:mod:`zendar_dataset.sim.clutter`).
+    clutter_gamma_db : float
+        ``gamma`` of the ground's constant-gamma law, ``sigma0 = gamma * sin(grazing angle)``, dB m²/m².
     clutter_weibull_shape : float
         Shape ``k`` of the Weibull law of a clutter scatterer's amplitude (``k = 2``: Rayleigh).
     clutter_spacing_m : float
@@ -56,7 +57,7 @@ class Imperfections:
     """
 
     road_clutter: bool = True
-    clutter_sigma0_db: float = -25.0
+    clutter_gamma_db: float = -14.4
     clutter_weibull_shape: float = 1.5
     clutter_spacing_m: float = 1.0
     multipath: bool = True

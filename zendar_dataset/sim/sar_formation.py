@@ -1,21 +1,27 @@
-"""SAR images from simulated per-chirp range profiles, through the package's backprojection.
+"""SAR images from simulated per-pulse range profiles, through the package's backprojection.
 
 Per image: the synthetic aperture is the stretch of the ego path of length
 ``aperture_m`` centred on the ego position at the image time; pulses are
-picked along it at the Nyquist spacing (below); their range profiles are
+placed along it at a uniform spacing (below); their range profiles are
 synthesised with the same physics as the cubes (static and moving scatterers,
 antenna pattern, path loss, Swerling fluctuation, thermal noise, range-Doppler
-coupling) for receiver 0; and :func:`zendar_dataset.sar.backprojection.backproject`
-forms the image from the *written* (noisy) tracklog poses, with no
-compensation of moving objects.
+coupling); and :func:`zendar_dataset.sar.backprojection.backproject` forms the
+image from the *written* (noisy) tracklog poses, with no compensation of moving
+objects.
 
-Pulse spacing: the two-way phase ``4 pi R / lambda`` of a scatterer changes along
-the track with spatial frequency ``2 u / lambda``, ``u`` the cosine of the angle
-between the track and the line of sight.  Over the radar's forward half-space
-``u`` spans ``[u_min, u_max]``, so complex samples spaced at most
-``lambda / (2 (u_max - u_min))`` (1.1 mm for a corner radar at 45 deg) keep every
-return un-aliased; chirps come every ``v T_c`` (~0.5 mm at 10 m/s), so only one
-in a few is needed and the rest are not simulated.
+Pulse spacing: the two-way phase ``4 pi R / lambda`` of a static scatterer
+changes along the track with spatial frequency ``2 u / lambda``, ``u`` the cosine
+of the angle between the track and the line of sight, ``|u| <= 1`` in every
+direction.  Pulses spaced ``lambda / 4`` apart (at the top of the sweep, with a
+10 % margin) therefore sample every direction without aliasing, behind the
+radar included, so no pixel of the image holds a grating lobe.  The spacing is
+uniform along the track: pulses are not rounded to the chirp grid, whose
+alternating 3- and 4-chirp gaps (the chirps come every ``v T_c``) spread every
+strong scatterer into a ring at its range.  Each pulse is simulated at the
+exact time the ego passes its position; the chirps come every ``v T_c < lambda /
+4`` (the ego drives slower than the radar's unambiguous speed
+``lambda / (4 T_c)``), so the chirp train holds the same along-track signal and
+an interpolating processor can form these pulses from it.
 """
 
 from __future__ import annotations
@@ -32,37 +38,86 @@ from zendar_dataset.sar.grid import ImageGrid
 from zendar_dataset.sim.rotate import rotate
 
 MIN_PULSES = 8
+# The slow-time taper of every simulated image (recorded in the calibration as sar_azimuth_window).
+AZIMUTH_WINDOW = "hann"
+# Pulses sample the static band 10 % finer than its Nyquist rate.
+NYQUIST_MARGIN = 1.1
 
 
-def nyquist_spacing_m(wavelength_m: float, boresight_from_track_rad: float) -> float:
-    """Largest pulse spacing that keeps the radar's forward half-space un-aliased (metres)."""
-    angles = np.linspace(boresight_from_track_rad - np.pi / 2, boresight_from_track_rad + np.pi / 2, 721)
-    u = np.cos(angles)
-    return wavelength_m / (2.0 * float(u.max() - u.min()))
+def pulse_spacing_m(params: FmcwParams) -> float:
+    """Along-track pulse spacing that samples static returns from every direction without aliasing (metres).
+
+    ``lambda / (4 * NYQUIST_MARGIN)`` at the sweep's top frequency ``f_c + B``, whose
+    wavelength is the shortest in the pulse.
+    """
+    top_wavelength_m = SPEED_OF_LIGHT_MPS / (params.center_frequency_hz + params.bandwidth_hz)
+    return top_wavelength_m / (4.0 * NYQUIST_MARGIN)
 
 
 def aperture_times(
     time_s: np.ndarray, distance_m: np.ndarray, t_center_s: float, aperture_m: float, spacing_m: float,
     chirp_interval_s: float, max_half_span_s: float = 1.0,
 ) -> np.ndarray:
-    """Pulse times (on the chirp grid) of the aperture centred on ``t_center_s``.
+    """Pulse times of the aperture centred on ``t_center_s``: uniform along the path, ``spacing_m`` apart.
 
     ``distance_m`` is the ego's travelled distance at ``time_s`` (non-decreasing).
     The aperture is shortened when the ego does not cover ``aperture_m`` within
-    ``max_half_span_s`` on either side (slow or stopped ego).
+    ``max_half_span_s`` on either side (slow or stopped ego); its pulses are then
+    centred in the distance covered.  When the ego covers less than
+    ``MIN_PULSES`` spacings, there is no synthetic aperture: a burst of
+    ``MIN_PULSES`` chirps (``chirp_interval_s`` apart) around the image time.
     """
     d_center = float(np.interp(t_center_s, time_s, distance_m))
     d_lo = max(d_center - aperture_m / 2, float(np.interp(t_center_s - max_half_span_s, time_s, distance_m)))
     d_hi = min(d_center + aperture_m / 2, float(np.interp(t_center_s + max_half_span_s, time_s, distance_m)))
     if d_hi - d_lo < spacing_m * MIN_PULSES:
-        # Ego (nearly) stopped: a short burst of chirps around the image time.
-        times = t_center_s + (np.arange(MIN_PULSES) - MIN_PULSES / 2) * chirp_interval_s
-    else:
-        targets = np.arange(d_lo, d_hi + 1e-12, spacing_m)
-        # First time each distance is reached (distance is flat while stopped).
-        times = np.interp(targets, distance_m, time_s)
-    snapped = np.unique(np.rint(times / chirp_interval_s)) * chirp_interval_s
-    return snapped
+        return t_center_s + (np.arange(MIN_PULSES) - MIN_PULSES / 2) * chirp_interval_s
+    n = int(np.floor((d_hi - d_lo) / spacing_m + 1e-9)) + 1
+    targets = 0.5 * (d_lo + d_hi) + (np.arange(n) - (n - 1) / 2) * spacing_m
+    return _first_times(time_s, distance_m, targets)
+
+
+def _first_times(time_s: np.ndarray, distance_m: np.ndarray, targets_m: np.ndarray) -> np.ndarray:
+    """The first time each distance is reached (the distance is flat while the ego stands)."""
+    after = np.clip(np.searchsorted(distance_m, targets_m, side="left"), 1, distance_m.shape[0] - 1)
+    d0, d1 = distance_m[after - 1], distance_m[after]
+    fraction = np.clip((targets_m - d0) / np.maximum(d1 - d0, 1e-300), 0.0, 1.0)
+    return time_s[after - 1] + fraction * (time_s[after] - time_s[after - 1])
+
+
+def chirps_per_pulse(time_s: np.ndarray, distance_m: np.ndarray, pulse_times_s: np.ndarray, spacing_m: float,
+                     chirp_interval_s: float) -> np.ndarray:
+    """Chirps ``[P]`` each pulse presums: those sent while the ego is within half a spacing of its position.
+
+    A processor integrates every chirp by presumming: it low-pass filters the chirp train in slow
+    time to the band of static returns and resamples it at the pulses' positions, so each pulse
+    carries the chirps of its stretch of track (more while the ego is slow, all of a stop's),
+    and the thermal noise falls by their number. Single chirps (``aperture_times``' burst when the
+    ego does not move): 1 each.
+    """
+    along = np.interp(pulse_times_s, time_s, distance_m)
+    if pulse_times_s.shape[0] < 2 or np.ptp(along) < spacing_m:
+        return np.ones(pulse_times_s.shape[0])
+    dwell = (_first_times(time_s, distance_m, along + spacing_m / 2)
+             - _first_times(time_s, distance_m, along - spacing_m / 2))
+    return np.maximum(dwell / chirp_interval_s, 1.0)
+
+
+def presum_factors(doppler_hz: np.ndarray, pulse_times_s: np.ndarray, ego_speed_mps: np.ndarray, spacing_m: float,
+                   chirp_interval_s: float) -> np.ndarray:
+    """What presumming does to each return ``[S, P]`` (complex): 1 for every static one, 0 or a phase for movers.
+
+    The chirp train samples a return of Doppler ``doppler_hz`` ``[S, P]`` at ``1 / T_c``, folding
+    it into ``[-1 / (2 T_c), 1 / (2 T_c))``; the presum filter passes the band its pulses sample,
+    ``|f| <= v / (2 spacing)`` (``v`` the ego speed at each pulse ``[P]``; static returns lie inside,
+    ``|f| <= 2 v / lambda``), and removes the rest; a folded return that passes carries its folded
+    frequency, so its phase at the pulse time ``t`` turns by ``-2 pi k t / T_c`` (``k`` the fold).
+    """
+    folds = np.rint(doppler_hz * chirp_interval_s)
+    folded = doppler_hz - folds / chirp_interval_s
+    passed = np.abs(folded) <= (np.asarray(ego_speed_mps) / (2.0 * spacing_m))[None, :]
+    turns = np.mod(folds * (np.asarray(pulse_times_s) / chirp_interval_s)[None, :], 1.0)
+    return np.where(passed, np.exp(-2j * np.pi * turns), 0.0)
 
 
 def sar_waveform(cube_params: FmcwParams, bandwidth_hz: float, max_range_m: float) -> FmcwParams:
@@ -200,8 +255,9 @@ def form_image(
 ) -> np.ndarray:
     """Backproject raw-DFT range profiles ``[P, N]`` from phase centres ``[P, 3]`` onto ``grid``.
 
-    The profiles are normalised by the window sum, so a point scatterer of
-    per-sample amplitude ``a`` seen by ``P`` pulses peaks near ``a * P``.
+    The pulses are tapered along the aperture by :data:`AZIMUTH_WINDOW` and the profiles are
+    normalised by the range window's sum, so a point scatterer of per-sample amplitude ``a``
+    peaks near ``a`` times the sum of the azimuth weights (``a * P / 2`` for Hann).
     ``device`` ``None`` or ``"cpu"`` uses the numba kernel; a CUDA device (``"cuda"``) the
     torch backend there, which computes the same float32 sum (equal to rounding).
     Returns complex64 ``[H, W]`` (numpy).
@@ -210,5 +266,6 @@ def form_image(
     scale = 1.0 / float(np.sum(window_values("hann", params.n_samples)))
     return backproject(
         prepared * np.float32(scale), phase_centers, grid, range_bin_m=bin_m, center_frequency_hz=frequency,
-        backend="numba" if device in (None, "cpu") else "torch", device=None if device == "cpu" else device,
+        azimuth_window=AZIMUTH_WINDOW, backend="numba" if device in (None, "cpu") else "torch",
+        device=None if device == "cpu" else device,
     )

@@ -18,7 +18,7 @@ from zendar_dataset.geometry.quaternion import quat_wxyz_to_matrix
 from zendar_dataset.radar.range_doppler import range_doppler, range_profiles
 from zendar_dataset.sim import camera as camera_model
 from zendar_dataset.sim import ego as ego_model
-from zendar_dataset.sim.clutter import road_clutter
+from zendar_dataset.sim.clutter import road_clutter, view_gains
 from zendar_dataset.sim.echoes import car_echoes
 from zendar_dataset.sim.imperfections import Imperfections
 from zendar_dataset.sim.imperfections import antenna_errors as channel_errors
@@ -27,8 +27,16 @@ from zendar_dataset.sim.lidar import lidar_sweep
 from zendar_dataset.sim.profiles import SimProfile
 from zendar_dataset.sim.radar_model import RadarFrontEnd, synthesize_cube, synthesize_range_profiles, thermal_noise
 from zendar_dataset.sim.raycast import line_of_sight
-from zendar_dataset.sim.rotate import compose, rotate, unrotate
-from zendar_dataset.sim.sar_formation import SarGeometry, aperture_times, form_image, nyquist_spacing_m, sar_waveform
+from zendar_dataset.sim.rotate import compose, dot, rotate, unrotate
+from zendar_dataset.sim.sar_formation import (
+    SarGeometry,
+    aperture_times,
+    chirps_per_pulse,
+    form_image,
+    presum_factors,
+    pulse_spacing_m,
+    sar_waveform,
+)
 from zendar_dataset.sim.traffic import make_traffic
 from zendar_dataset.sim.trajectory import follow_road, speed_profile
 from zendar_dataset.sim.world import (
@@ -38,7 +46,6 @@ from zendar_dataset.sim.world import (
     ScattererSet,
     World,
     build_static_world,
-    street_edge_m,
 )
 
 GPS_EPOCH_START_NS = 1_300_000_000_000_000_000
@@ -100,10 +107,12 @@ def build_scene(profile: SimProfile, seed: int, scene_index: int) -> SceneTruth:
         intersections.append(intersections[-1] + float(road_rng.uniform(60.0, 150.0)))
     gaps = [(s - INTERSECTION_HALF_WIDTH_M, s + INTERSECTION_HALF_WIDTH_M) for s in intersections]
     rng = stream_rng(seed, scene_index, "world")
-    boxes, scatterers = build_static_world(rng, road, ego_start_s - 40.0, road_end - 40.0, profile.facade_spacing_m, gaps)
-    # The road's surface between the curbs, as clutter (its own stream: the world's draws stay as they were).
+    boxes, scatterers, ground_m = build_static_world(rng, road, ego_start_s - 40.0, road_end - 40.0,
+                                                     profile.facade_spacing_m, gaps)
+    # The ground from facade to facade (road and sidewalks), as clutter (its own stream: the world's draws
+    # stay as they were).
     clutter = road_clutter(stream_rng(seed, scene_index, "clutter"), road, -cruise * PAD_S - 40.0, road_end - 40.0,
-                           (street_edge_m(-1.0), street_edge_m(1.0)), profile.imperfections)
+                           ground_m, profile.imperfections)
     scatterers = ScattererSet.concatenate([scatterers, clutter])
     rng = stream_rng(seed, scene_index, "traffic")
     n_cars = int(rng.integers(profile.n_moving_cars[0], profile.n_moving_cars[1] + 1))
@@ -152,7 +161,9 @@ def _scatterers_in_sensor(truth: SceneTruth, sensor: str, t_s: np.ndarray, max_r
     moving_pos = moving_pos[moving_near]
     all_pos = np.concatenate([np.broadcast_to(static.position_m[near][:, None, :], (int(near.sum()), t_s.shape[0], 3)), moving_pos])
     local = unrotate(rotation, all_pos - position[None])
-    rcs = np.concatenate([static.rcs_m2[near], moving.rcs_m2[moving_near]])
+    # Diffuse ground and wall cells return what their view from the radar (middle time) gives.
+    static_rcs = static.rcs_m2[near] * view_gains(static.subset(near), position[mid])
+    rcs = np.concatenate([static_rcs, moving.rcs_m2[moving_near]])
     swerling1 = np.concatenate([static.swerling1[near], moving.swerling1[moving_near]])
     phase = np.concatenate([static.phase_rad[near], moving.phase_rad[moving_near]])
     if with_velocity:
@@ -204,8 +215,7 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     corner_sensor = unrotate(mount.rotation, geometry.corners_ego - mount.translation)
     r_lo, r_hi = 0.0, float(np.linalg.norm(corner_sensor, axis=1).max()) + 3.0
     params = sar_waveform(ego_model.radar_params(profile), profile.sar_bandwidth_hz, r_hi)
-    boresight_from_track = float(np.arctan2(mount.rotation[1, 0], mount.rotation[0, 0]))
-    spacing = nyquist_spacing_m(params.wavelength_m, boresight_from_track)
+    spacing = pulse_spacing_m(params)
     ego = truth.ego
     distance = np.concatenate([[0.0], np.cumsum(0.5 * (ego.speed_mps[1:] + ego.speed_mps[:-1]) * np.diff(ego.time_s))])
     t = aperture_times(ego.time_s, distance, t_center_s, profile.sar_aperture_m, spacing, params.chirp_interval_s)
@@ -221,34 +231,47 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     keep &= np.all(np.abs(mid_ego[:, :2] - geometry.center_ego[:2]) < half_extent, axis=1)
     fluctuation = _fluctuation(rng, swerling1, phase)[keep]
     local, velocity = local[keep], velocity[keep]
-    amplitude = front_end.amplitude(params, rcs[keep][:, None], local) * fluctuation[:, None]  # [S, P]
-    receiver = params.rx_positions_m[0]
+    # Every chirp, presummed to the pulses (sar_formation.chirps_per_pulse): static returns whole,
+    # movers outside the static band filtered out, the noise down by the chirps per pulse.
+    chirps = chirps_per_pulse(ego.time_s, distance, t, spacing, params.chirp_interval_s)
+    range_rate = dot(local, velocity) / np.maximum(np.linalg.norm(local, axis=-1), 1e-9)  # [S, P]
+    presum = presum_factors(-2.0 * range_rate / params.wavelength_m, t, np.linalg.norm(ego.velocity_at(t), axis=-1),
+                            spacing, params.chirp_interval_s) if np.any(chirps > 1.0) else 1.0
+    # Every receiver, summed coherently: in the far field of the 6 mm array (beyond ~2 cm) their sum
+    # focused on a pixel is the signal at the array's centre times the channels' mean gain, with the
+    # noise of n_rx independent channels.
+    n_rx = params.n_antennas
+    gain = channel_errors(ego_model.RADARS.index(sensor), n_rx, profile.imperfections).mean()
+    amplitude = front_end.amplitude(params, rcs[keep][:, None], local) * (fluctuation[:, None] * presum * gain)  # [S, P]
+    receiver = params.rx_positions_m.mean(axis=0)
     profiles = synthesize_range_profiles(
         params, local.transpose(1, 0, 2), velocity.transpose(1, 0, 2), amplitude.T, receiver, half_width_bins=SAR_HALF_WIDTH_BINS
     )
     noise = thermal_noise(rng, (t.shape[0], params.n_samples, 1), front_end.noise_power_w(params))
+    noise *= (1.0 / np.sqrt(chirps * n_rx)).astype(np.float32)[:, None, None]
     profiles = profiles + range_profiles(noise, workers=1)[..., 0]
     # Backprojection uses the written (noisy) tracklog, in the scene's ENU frame.
-    stamps = truth.start_ns + np.rint(t * 1e9).astype(np.int64)
-    imu_position, imu_attitude = tracklog.at(stamps)
-    enu_r_ecef = truth.enu.ecef_R_enu.T
-    imu_r = compose(enu_r_ecef, quat_wxyz_to_matrix(imu_attitude))  # [P, 3, 3] IMU -> ENU
-    imu_t = truth.enu.ecef_to_enu(imu_position)
-    ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
-    ego_r = compose(imu_r, ego_from_imu.rotation.T)
-    ego_t = imu_t - rotate(ego_r, ego_from_imu.translation)
+    ego_r, ego_t = ego_poses_from_tracklog(truth, tracklog, t)
     phase_center_ego = mount.translation + rotate(mount.rotation, receiver / 2.0)
     phase_centers = ego_t + rotate(ego_r, phase_center_ego)
-    center_stamp = truth.start_ns + int(round(t_center_s * 1e9))
-    c_position, c_attitude = tracklog.at(center_stamp)
-    c_r = compose(compose(enu_r_ecef, quat_wxyz_to_matrix(c_attitude[0])), ego_from_imu.rotation.T)
-    c_t = truth.enu.ecef_to_enu(c_position[0]) - rotate(c_r, ego_from_imu.translation)
+    c_r, c_t = ego_poses_from_tracklog(truth, tracklog, np.array([t_center_s]))
     # Keep the image plane level: only the yaw of the (noisy) ego pose orients it.
-    yaw = np.arctan2(c_r[1, 0], c_r[0, 0])
+    yaw = np.arctan2(c_r[0, 1, 0], c_r[0, 0, 0])
     level = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
-    grid = geometry.grid_enu(level, c_t)
+    grid = geometry.grid_enu(level, c_t[0])
     image = form_image(params, profiles, phase_centers, grid, device)
     return image, grid.transformed(truth.enu.ecef_T_enu), (float(t[0]), float(t[-1]))
+
+
+def ego_poses_from_tracklog(truth: SceneTruth, tracklog: PoseInterpolator, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ego poses ``enu_T_ego`` at scene times ``t_s`` ``[P]`` as a tracklog gives them (interpolated, through
+    the IMU's mount): rotations ``[P, 3, 3]`` and translations ``[P, 3]`` in the scene's ENU frame."""
+    stamps = truth.start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
+    imu_position, imu_attitude = tracklog.at(stamps)
+    imu_r = compose(truth.enu.ecef_R_enu.T, quat_wxyz_to_matrix(imu_attitude))  # [P, 3, 3] IMU -> ENU
+    ego_from_imu = ego_model.EGO_T_SENSOR[ego_model.IMU]
+    ego_r = compose(imu_r, ego_from_imu.rotation.T)
+    return ego_r, truth.enu.ecef_to_enu(imu_position) - rotate(ego_r, ego_from_imu.translation)
 
 
 def sar_footprint(profile: SimProfile, sensor: str) -> SarGeometry:
@@ -310,7 +333,8 @@ def write_scene(writer, truth: SceneTruth, profile: SimProfile, seed: int, scene
         rng = stream_rng(seed, scene_index, f"sar_{sensor}")
         for t in sar_times:
             image, grid, (t0, t1) = simulate_sar(truth, profile, sensor, t, rng, tracklog, sar_device)
-            writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64))
+            writer.append_sar(sensor, ns(t), image, grid.origin, grid.di, grid.dj, np.array([ns(t0), ns(t1)], np.int64),
+                              ego_stopped=ego_model.stood_still(truth.ego, t0, t1))
     rng = stream_rng(seed, scene_index, "lidar")
     returns_per_sweep = {}
     for t in lidar_times:

@@ -91,6 +91,20 @@ class Road:
         return np.stack([east, north, np.zeros_like(east)], axis=-1), yaw
 
 
+# How a scatterer's RCS depends on where it is seen from (clutter.view_gains): a point keeps its RCS;
+# a ground cell's is times sin(grazing angle), a wall cell's times cos²(incidence from its normal).
+SURFACE_POINT, SURFACE_GROUND, SURFACE_WALL = 0, 1, 2
+
+# Diffuse backscatter of the street's surfaces other than the ground (docs/simulator.md, sources):
+# building walls are Lambertian, sigma0 = 4 S² cos²(incidence), with scattering coefficient S; tree
+# canopies scatter from their volume, sigma0 per projected area the same from every side.
+WALL_SCATTERING = 0.3
+VEGETATION_SIGMA0_DB = -10.0
+# The facade's cells: each point of a row stands for the wall between the rows (0-0.8, 0.8-1.7, 1.7-2.7 m).
+FACADE_ROWS_M = np.array([0.4, 1.2, 2.2])
+FACADE_ROW_HEIGHT_M = 0.9
+
+
 @dataclass
 class ScattererSet:
     """Point scatterers: position (world or body frame), RCS, fluctuation model, phase.
@@ -109,6 +123,11 @@ class ScattererSet:
     owner_box : numpy.ndarray or None
         ``[S]`` int64 index of the static box the scatterer lies on or in, which therefore does not
         hide it (a facade's wall, a pole); -1 (or None for all) where every box may hide it.
+    surface : numpy.ndarray or None
+        ``[S]`` int8 ``SURFACE_*``: a point, or a cell of the ground or of a wall whose RCS
+        (``rcs_m2`` at normal view) depends on the viewing direction; None: all points.
+    normal : numpy.ndarray or None
+        ``[S, 3]`` outward unit normal of wall cells (zero elsewhere); None: all zero.
     """
 
     position_m: np.ndarray
@@ -116,17 +135,29 @@ class ScattererSet:
     swerling1: np.ndarray
     phase_rad: np.ndarray
     owner_box: np.ndarray | None = None
+    surface: np.ndarray | None = None
+    normal: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.position_m.shape[0]
         if self.owner_box is None:
             self.owner_box = np.full(n, -1, np.int64)
-        if self.position_m.shape != (n, 3) or any(a.shape != (n,) for a in (self.rcs_m2, self.swerling1, self.phase_rad, self.owner_box)):
-            raise ValueError("scatterer arrays must be [S, 3], [S], [S], [S], [S]")
+        if self.surface is None:
+            self.surface = np.full(n, SURFACE_POINT, np.int8)
+        if self.normal is None:
+            self.normal = np.zeros((n, 3))
+        vectors = (self.rcs_m2, self.swerling1, self.phase_rad, self.owner_box, self.surface)
+        if self.position_m.shape != (n, 3) or self.normal.shape != (n, 3) or any(a.shape != (n,) for a in vectors):
+            raise ValueError("scatterer arrays must be [S, 3], [S], [S], [S], [S], [S], [S, 3]")
 
     @classmethod
     def empty(cls) -> ScattererSet:
         return cls(np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64))
+
+    def subset(self, which: np.ndarray) -> ScattererSet:
+        """The scatterers selected by ``which`` (a boolean mask or indices)."""
+        return ScattererSet(self.position_m[which], self.rcs_m2[which], self.swerling1[which], self.phase_rad[which],
+                            self.owner_box[which], self.surface[which], self.normal[which])
 
     @classmethod
     def concatenate(cls, sets: list[ScattererSet]) -> ScattererSet:
@@ -137,6 +168,8 @@ class ScattererSet:
             np.concatenate([s.swerling1 for s in sets]),
             np.concatenate([s.phase_rad for s in sets]),
             np.concatenate([s.owner_box for s in sets]),
+            np.concatenate([s.surface for s in sets]),
+            np.concatenate([s.normal for s in sets]),
         )
 
 
@@ -354,7 +387,7 @@ def build_static_world(
     s_end_m: float,
     facade_spacing_m: float,
     gaps_s: list[tuple[float, float]] = (),
-) -> tuple[BoxSet, ScattererSet]:
+) -> tuple[BoxSet, ScattererSet, tuple[float, float]]:
     """Facades, parked cars, poles, trees, curbs and guard rails along both sides of ``road``.
 
     The cross section (lateral offsets from the ego lane's centre, left positive) is
@@ -369,12 +402,17 @@ def build_static_world(
         The static boxes.
     scatterers : ScattererSet
         Their scatterers, ENU; ``owner_box`` indexes ``boxes`` (or -1, see :meth:`_Placer.add`).
+    ground_m : (float, float)
+        Lateral offsets of the right and the left facade: the ground between them (road, curbs and
+        sidewalks) is the street's open surface.
     """
     placer = _Placer()
+    facades = {}
     for side in (1.0, -1.0):
         edge = street_edge_m(side)  # lateral offset of the road edge (inner face of the curb)
         sidewalk = rng.uniform(*SIDEWALK_WIDTH_M)
         facade = side * (abs(edge) + CURB_WIDTH_M + sidewalk)
+        facades[side] = facade
         guard_rail = rng.random() < 0.25
         s = s_start_m
         while s < s_end_m:
@@ -389,13 +427,20 @@ def build_static_world(
             normal = np.array([-np.sin(yaw), np.cos(yaw), 0.0]) * side
             depth, height = 6.0, rng.uniform(6.0, 15.0)
             start = pos - tangent * length / 2
-            pts = _face_points(start, tangent, length, facade_spacing_m, np.array([0.4, 1.2, 2.2]))
+            pts = _face_points(start, tangent, length, facade_spacing_m, FACADE_ROWS_M)
             pts[:, :2] += rng.normal(0, 0.03, (pts.shape[0], 2))
-            rcs = rng.lognormal(np.log(0.05), 1.0, pts.shape[0])
+            # Diffuse wall cells: Lambertian at normal view times a log-normal factor of unit mean (the
+            # heavy tail of urban clutter), fluctuating from frame to frame as the view moves, seen
+            # off-normal through clutter.view_gains.
+            speckle = rng.lognormal(0.0, 1.0, pts.shape[0]) / np.exp(0.5)
+            rcs = 4.0 * WALL_SCATTERING**2 * facade_spacing_m * FACADE_ROW_HEIGHT_M * speckle
             strong = rng.random(pts.shape[0]) < 0.05  # window frames, door recesses: corner reflectors
             rcs[strong] = rng.uniform(2.0, 10.0, strong.sum())
+            wall = _scatterers(rng, pts, rcs, ~strong)
+            wall.surface = np.where(strong, SURFACE_POINT, SURFACE_WALL).astype(np.int8)
+            wall.normal = np.where(strong[:, None], 0.0, -normal[None, :])
             placer.add(_box(pos + normal * depth / 2 + [0, 0, height / 2], (length, depth, height), yaw, COLORS["building"]),
-                       _scatterers(rng, pts, rcs, ~strong))
+                       wall)
             # Curb along the block, just outside the road edge.
             cpos, _ = road.point(mid, side * (abs(edge) + CURB_WIDTH_M / 2))
             cpts = _face_points(cpos - tangent * length / 2, tangent, length, 0.5, np.array([0.1]))
@@ -434,6 +479,8 @@ def build_static_world(
                     canopy = _box(opos + [0, 0, trunk_top + 1.25], (3.0, 3.0, 2.5), oyaw, COLORS["canopy"])
                     if placer.fits(trunk) and placer.fits(canopy):
                         placer.add(trunk, _scatterers(rng, pts[:1], np.array([0.3]), np.ones(1, bool)))
-                        placer.add(canopy, _scatterers(rng, pts[1:], np.full(4, 0.05), np.ones(4, bool)))
+                        # The canopy's volume return: sigma0 times its side's area (3 m by 2.5 m), over 4 points.
+                        canopy_rcs = 10.0 ** (VEGETATION_SIGMA0_DB / 10.0) * 3.0 * 2.5 / 4
+                        placer.add(canopy, _scatterers(rng, pts[1:], np.full(4, canopy_rcs), np.ones(4, bool)))
             s += length + (rng.uniform(12.0, 16.0) if rng.random() < 0.15 else rng.uniform(0.5, 4.0))
-    return BoxSet.concatenate(placer.boxes), ScattererSet.concatenate(placer.scatterers)
+    return BoxSet.concatenate(placer.boxes), ScattererSet.concatenate(placer.scatterers), (facades[-1.0], facades[1.0])
