@@ -5,9 +5,12 @@ Per image: the synthetic aperture is the stretch of the ego path of length
 placed along it at a uniform spacing (below); their range profiles are
 synthesised with the same physics as the cubes (static and moving scatterers,
 antenna pattern, path loss, Swerling fluctuation, thermal noise, range-Doppler
-coupling); and :func:`zendar_dataset.sar.backprojection.backproject` forms the
-image from the *written* (noisy) tracklog poses, with no compensation of moving
-objects.
+coupling), each pulse standing for every chirp of every receiver
+(:func:`chirps_per_pulse`, :func:`presum_factors`; the receivers as one channel at
+the array's centre, docs/simulator.md); and
+:func:`zendar_dataset.sar.backprojection.backproject` forms the image, tapered by
+:data:`AZIMUTH_WINDOW` along the aperture, from the *written* (noisy) tracklog
+poses, with no compensation of moving objects.
 
 Pulse spacing: the two-way phase ``4 pi R / lambda`` of a static scatterer
 changes along the track with spatial frequency ``2 u / lambda``, ``u`` the cosine

@@ -232,11 +232,14 @@ def simulate_sar(truth: SceneTruth, profile: SimProfile, sensor: str, t_center_s
     fluctuation = _fluctuation(rng, swerling1, phase)[keep]
     local, velocity = local[keep], velocity[keep]
     # Every chirp, presummed to the pulses (sar_formation.chirps_per_pulse): static returns whole,
-    # movers outside the static band filtered out, the noise down by the chirps per pulse.
+    # movers outside the static band filtered out, the noise down by the chirps per pulse. A burst of
+    # single chirps (the ego did not move) is not presummed.
     chirps = chirps_per_pulse(ego.time_s, distance, t, spacing, params.chirp_interval_s)
-    range_rate = dot(local, velocity) / np.maximum(np.linalg.norm(local, axis=-1), 1e-9)  # [S, P]
-    presum = presum_factors(-2.0 * range_rate / params.wavelength_m, t, np.linalg.norm(ego.velocity_at(t), axis=-1),
-                            spacing, params.chirp_interval_s) if np.any(chirps > 1.0) else 1.0
+    presum = 1.0
+    if np.any(chirps > 1.0):
+        range_rate = dot(local, velocity) / np.maximum(np.linalg.norm(local, axis=-1), 1e-9)  # [S, P]
+        presum = presum_factors(-2.0 * range_rate / params.wavelength_m, t, np.linalg.norm(ego.velocity_at(t), axis=-1),
+                                spacing, params.chirp_interval_s)
     # Every receiver, summed coherently: in the far field of the 6 mm array (beyond ~2 cm) their sum
     # focused on a pixel is the signal at the array's centre times the channels' mean gain, with the
     # noise of n_rx independent channels.
