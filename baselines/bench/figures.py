@@ -86,6 +86,48 @@ def _box_corners(car: dict[str, float]) -> np.ndarray:
     return half @ np.array([[c, s], [-s, c]]) + [car["x"], car["y"]]
 
 
+def compose_layers(
+    sar_layers: list[tuple[np.ndarray, np.ndarray]], extent_m: float, cell_m: float | None = None
+) -> tuple[np.ndarray, float]:
+    """Every radar's SAR image on one ego-frame grid, the brightest value per cell.
+
+    Drawing one image over another would hide the first wherever they overlap (both radars see the
+    lane ahead); the maximum keeps what either radar shows there.
+
+    Parameters
+    ----------
+    sar_layers
+        As :func:`bev_figure`'s.
+    extent_m
+        The grid spans x in [-extent_m, extent_m] and y in [-extent_m, extent_m] (ego frame, metres).
+    cell_m
+        Cell size in metres; by default √2 times the coarsest spacing between neighbouring pixels
+        of the layers: a cell that wide holds a pixel of a lattice of that spacing however it is
+        rotated, so an image leaves no empty cells inside it.
+
+    Returns
+    -------
+    grid : numpy.ndarray
+        ``[N, N]`` float64, ``grid[i, j]`` at x = -extent_m + (i + 0.5) * cell_m and
+        y = -extent_m + (j + 0.5) * cell_m; NaN where no image covers the cell.
+    cell_m : float
+        The cell size used.
+    """
+    if cell_m is None:
+        spacings = [float(np.max(np.hypot(*np.moveaxis(np.diff(xy, axis=axis), -1, 0))))
+                    for _, xy in sar_layers for axis in (0, 1) if xy.shape[axis] > 1]
+        cell_m = np.sqrt(2.0) * max(spacings, default=1.0)
+    n = int(np.ceil(2.0 * extent_m / cell_m))
+    grid = np.full((n, n), -np.inf)
+    for image_db, xy_ego in sar_layers:
+        index = np.floor((xy_ego.reshape(-1, 2) + extent_m) / cell_m).astype(np.int64)
+        values = np.asarray(image_db, np.float64).reshape(-1)
+        inside = np.all((index >= 0) & (index < n), axis=1) & np.isfinite(values)
+        np.maximum.at(grid, (index[inside, 0], index[inside, 1]), values[inside])
+    grid[np.isneginf(grid)] = np.nan
+    return grid, cell_m
+
+
 def bev_figure(
     sar_layers: list[tuple[np.ndarray, np.ndarray]],
     ground_truth: list[dict[str, float]],
@@ -99,7 +141,8 @@ def bev_figure(
     ----------
     sar_layers
         Per SAR image: ``image_db [H, W]`` (dB over the image's median) and ``xy_ego [H, W, 2]``,
-        the ego-frame position of each pixel centre.
+        the ego-frame position of each pixel centre. Overlapping images are composed per cell
+        (:func:`compose_layers`), never drawn one over the other.
     ground_truth
         Labelled cars of the frame: ``x, y, length, width, yaw`` (ego frame, m, rad).
     detections
@@ -111,10 +154,11 @@ def bev_figure(
     FigureCanvasAgg(figure)
     axes = figure.add_subplot()
     mesh = None
-    for image_db, xy_ego in sar_layers:
-        # Plot y to the left as on a map seen from above: horizontal axis = -y.
-        mesh = axes.pcolormesh(-xy_ego[..., 1], xy_ego[..., 0], image_db, cmap="gray", vmin=-10.0, vmax=30.0,
-                               shading="nearest", rasterized=True)
+    if sar_layers:
+        grid, cell_m = compose_layers(sar_layers, extent_m)
+        # Plot y to the left as on a map seen from above: horizontal axis = -y, vertical = x.
+        mesh = axes.imshow(grid[:, ::-1], cmap="gray", vmin=-10.0, vmax=30.0, origin="lower", interpolation="nearest",
+                           extent=(extent_m - grid.shape[1] * cell_m, extent_m, -extent_m, -extent_m + grid.shape[0] * cell_m))
     if mesh is not None:
         figure.colorbar(mesh, ax=axes, label="SAR, dB over the image median", location="left", shrink=0.6)
     for radius in (15.0, 30.0, 60.0):
