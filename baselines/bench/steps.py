@@ -37,6 +37,8 @@ from zendar_baselines.labels.splits import SemiSupervisedSplit, make_split, read
 SPLIT_FILE = "split.json"
 STORE_DIR = "store"
 CHECKPOINT_RECORD = "checkpoint.json"
+# The manual-label masks the automatic labels' quality is measured against (write_auto_labels).
+QUALITY_REFERENCE = MaskParams(manual_targets="cfar-peaks")
 
 
 def mask_parameters(params: MaskParams | None = None) -> dict[str, Any]:
@@ -73,7 +75,10 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
 
     With ``quality``, every scene's masks are also measured against its manual-label masks and the
     pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
-    labels, feed no model and choose nothing, so they may read the manual labels of any scene.
+    labels, feed no model and choose nothing, so they may read the manual labels of any scene. The
+    reference is the CFAR-gated kind (``manual_targets="cfar-peaks"``), not the box targets the CNNs
+    train on: automatic labels are made from CFAR peaks, so the figures measure which of the peaks
+    on labelled cars they keep, and keep their meaning.
 
     Parameters
     ----------
@@ -99,7 +104,7 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
                 store.write_scene(scene_id, auto)
             if quality:
                 for radar, (_, auto_masks) in auto.items():
-                    _, label_masks = scene_masks(reader, radar, "labels", progress=False)
+                    _, label_masks = scene_masks(reader, radar, "labels", params=QUALITY_REFERENCE, progress=False)
                     scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
     if not quality:
         return None

@@ -1,37 +1,62 @@
 """Per-cube range-Doppler masks: the CNNs' targets (paper §2.3, Fig. 2).
 
 A mask is uint8 ``[R, D]`` of the classes of :mod:`zendar_baselines.labels.mask_classes`: ``BACKGROUND``,
-``MOVING`` or ``UNCERTAIN`` (a cell the loss should not count). Both kinds start from the CA-CFAR peaks of the cube and grow each chosen
-peak into its *segment* (:func:`grow_segments`): the cells around it that belong to the same
-response, so that the target covers a peak's main lobe and not one cell.
+``MOVING`` or ``UNCERTAIN`` (a cell the loss should not count).
 
-- **automatic** (:func:`auto_label_mask`, pretraining): the peaks go through the detection chain
-  (DOA, SAR static-scene test) and are clustered (DBSCAN, per cube). A cluster whose points the SAR
-  test calls all dynamic is MOVING; a cluster mixing dynamic and not-dynamic points is UNCERTAIN
-  (Fig. 2's blue points); a cluster without dynamic points stays BACKGROUND. Where a MOVING segment
-  and an UNCERTAIN one overlap, the cell is UNCERTAIN: the overlap says the response is shared with
-  points the SAR image calls static, and a wrong MOVING target costs more than a skipped cell.
-- **manual** (:func:`label_mask`, fine-tuning and the supervised rows): a peak whose point falls inside
-  a labelled box grown by :attr:`MaskParams.box_margin_m`, with the radial velocity the box's car
-  would show there, is MOVING; a peak inside a box with another velocity (the ground or a facade
-  seen through the box's margin, a wheel's micro-Doppler), or within :attr:`MaskParams.near_margin_m`
-  of a box, is UNCERTAIN. Here MOVING wins an overlap: the box is the truth, nearness only a
-  tolerance for range and DOA errors.
+- **automatic** (:func:`auto_label_mask`, pretraining; the paper's): the cube's CA-CFAR peaks go through
+  the detection chain (DOA, SAR static-scene test) and are clustered (DBSCAN, per cube); each chosen
+  peak grows into its *segment* (:func:`grow_segments`), the cells around it that belong to the same
+  response, so that the target covers a peak's main lobe and not one cell. A cluster whose points
+  the SAR test calls all dynamic is MOVING; a cluster mixing dynamic and not-dynamic points is
+  UNCERTAIN (Fig. 2's blue points); a cluster without dynamic points stays BACKGROUND. Where a MOVING
+  segment and an UNCERTAIN one overlap, the cell is UNCERTAIN: the overlap says the response is
+  shared with points the SAR image calls static, and a wrong MOVING target costs more than a
+  skipped cell.
+- **manual** (:func:`label_mask`, fine-tuning and the supervised rows), two kinds
+  (:attr:`MaskParams.manual_targets`):
+
+  - ``"boxes"`` (default, :func:`box_label_mask`): each labelled box is projected into the map
+    (:func:`zendar_baselines.labels.box_targets.box_footprints`: its range extent from the radar and
+    the Doppler its points show relative to the radar). The car's cells are that footprint and the
+    windows' main lobe around it (:data:`LOBE_BINS`, as the automatic labels' segments keep a peak's
+    main lobe); those whose power rises :attr:`MaskParams.floor_margin_db` above the CFAR noise
+    estimate are MOVING. The car's other cells, the ring one bin further out (range and Doppler
+    error: the label's velocity, the ego's from the tracklog, a turning car's yaw rate) and the cells
+    of a box's parts outside the radar's field of view are UNCERTAIN; background elsewhere. A car's
+    cells count whether CFAR found a peak there or not.
+  - ``"cfar-peaks"`` (:func:`cfar_peak_label_mask`, the ablation's CFAR-gated target): a CFAR peak
+    whose point falls inside a labelled box grown by :attr:`MaskParams.box_margin_m`, with the
+    radial velocity the box's car would show there, is MOVING; a peak inside a box with another
+    velocity (the ground or a facade seen through the box's margin, a wheel's micro-Doppler), or
+    within :attr:`MaskParams.near_margin_m` of a box, is UNCERTAIN; the peaks grow into segments.
+    Every cell of a car that CFAR missed is BACKGROUND: a CNN trained on it learns to copy CFAR.
+
+  In both, MOVING wins an overlap: the box is the truth, the uncertain cells only a tolerance.
+
+Wheels: a rim point moves over the ground at anything from 0 to twice the car's speed, so wheel
+returns fall anywhere between the static scene's Doppler and twice the body's radial velocity over
+the ground, a different place in every cube. The box target gives them no Doppler guard band: a band
+that wide would cover the static clutter at the car's range (the negatives the CNN most needs to
+learn), and the simulated rim points (0.05 m² each, ``Imperfections.wheel_rcs_m2``) are 12 dB below
+a body scatterer's median (0.8 m²); the one-bin ring takes the spill of the body's own lobes.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.ndimage
 from tqdm import tqdm
 
+from zendar_baselines.labels.box_targets import box_footprints
 from zendar_baselines.labels.mask_classes import BACKGROUND, MASK_DTYPE, MOVING, UNCERTAIN
 from zendar_dataset.detection import (
     ON_CAR_MARGIN_M,
     ChainParams,
     LabelBoxes,
+    RadarCells,
     cfar_map,
     cluster_labels,
     cube_points,
@@ -47,6 +72,8 @@ from zendar_dataset.radar import FmcwParams
 from zendar_dataset.sar.frames import SarFrames
 
 KINDS = ("auto", "labels")
+#: The kinds of manual-label target (:attr:`MaskParams.manual_targets`).
+MANUAL_TARGETS = ("boxes", "cfar-peaks")
 
 # A Hann-windowed point response falls 10 dB below its peak 1.27 bins out, so a 10 dB drop keeps
 # a peak's main lobe and the neighbouring peaks of the same car, not the sidelobes (-32 dB).
@@ -60,6 +87,18 @@ DEFAULT_NEAR_MARGIN_M = 2.5
 # A peak inside a box must show the box's radial velocity within this: two Doppler bins of the demo
 # profile (0.625 m/s) plus the spread DOA errors cause (the classical detector's Doppler test margin).
 DEFAULT_MAX_VELOCITY_ERROR_MPS = 1.5
+# A box target's cell is MOVING when its power is this far above the CFAR noise estimate. The power
+# of a cell summed over A = 4 antennas is, on noise alone, Gamma(4) distributed: it exceeds 5 dB over
+# its mean in 0.14 % of cells (3 dB: 4.3 %, 4 dB: 1.0 %), so a car's footprint of a few tens of cells
+# holds a noise cell marked MOVING about once in twenty footprints, while a return at 5 dB SNR is
+# below the 12.8 dB a CFAR peak needs (Pfa 1e-4) and counts.
+DEFAULT_FLOOR_MARGIN_DB = 5.0
+# A car's returns spread over the windows' main lobe around its footprint: a Hann-windowed point
+# response is 6 dB down one bin out and 10 dB down 1.27 bins out (DEFAULT_DROP_DB's segments).
+LOBE_BINS = 1
+# Beyond the main lobe, one more bin is uncertain: Doppler errors of the label's and the ego's
+# velocity (a few tenths of a m/s) and the range bin a scatterer at a box's edge rounds into.
+ERROR_BINS = 1
 
 
 @dataclass(frozen=True)
@@ -82,6 +121,12 @@ class MaskParams:
     max_velocity_error_mps : float
         Manual masks: largest difference between a point's measured radial velocity over the ground
         and the one its box's car would show there.
+    manual_targets : {"boxes", "cfar-peaks"}
+        Manual masks: the labelled boxes projected into the map, or the CFAR peaks on the boxes (the
+        CFAR-gated target, kept for the ablation); module docstring.
+    floor_margin_db : float
+        ``"boxes"``: a footprint cell is MOVING when its power is this far above the CFAR noise
+        estimate (dB).
     """
 
     chain: ChainParams = field(default_factory=ChainParams)
@@ -90,6 +135,8 @@ class MaskParams:
     box_margin_m: float = ON_CAR_MARGIN_M
     near_margin_m: float = DEFAULT_NEAR_MARGIN_M
     max_velocity_error_mps: float = DEFAULT_MAX_VELOCITY_ERROR_MPS
+    manual_targets: str = "boxes"
+    floor_margin_db: float = DEFAULT_FLOOR_MARGIN_DB
 
     def __post_init__(self) -> None:
         problems = []
@@ -101,6 +148,11 @@ class MaskParams:
             problems.append(f"need 0 <= box_margin_m <= near_margin_m, got {self.box_margin_m!r} and {self.near_margin_m!r}")
         if not self.max_velocity_error_mps > 0:
             problems.append(f"max_velocity_error_mps must be > 0, got {self.max_velocity_error_mps!r}")
+        if self.manual_targets not in MANUAL_TARGETS:
+            problems.append(f"manual_targets must be one of {MANUAL_TARGETS}, got {self.manual_targets!r}")
+        margin = self.floor_margin_db
+        if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not (math.isfinite(margin) and margin >= 0):
+            problems.append(f"floor_margin_db must be a finite number >= 0 dB, got {self.floor_margin_db!r}")
         if problems:
             raise ZendarError("invalid MaskParams: " + "; ".join(problems))
 
@@ -215,7 +267,7 @@ def label_mask(
     cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses, boxes_ego_at_cube_time: LabelBoxes,
     params: MaskParams | None = None,
 ) -> np.ndarray:
-    """The manual-label target of one cube (module docstring).
+    """The manual-label target of one cube, of the kind :attr:`MaskParams.manual_targets` names.
 
     Parameters
     ----------
@@ -237,11 +289,61 @@ def label_mask(
         ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.labels.mask_classes`.
     """
     params = MaskParams() if params is None else params
-    cells, power_db, floor_db = _power_db_and_floor(cube, params)
+    make = box_label_mask if params.manual_targets == "boxes" else cfar_peak_label_mask
+    return make(cube, timestamp_ns, calibration, poses, boxes_ego_at_cube_time, params)
+
+
+def box_label_mask(
+    cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses, boxes_ego_at_cube_time: LabelBoxes,
+    params: MaskParams | None = None,
+) -> np.ndarray:
+    """The box target of one cube: the labelled boxes projected into the map (module docstring).
+
+    Parameters and return value as :func:`label_mask`.
+    """
+    params = MaskParams() if params is None else params
+    _cells, power_db, floor_db = _power_db_and_floor(cube, params)
     mask = np.full(power_db.shape, BACKGROUND, MASK_DTYPE)
+    if len(boxes_ego_at_cube_time) == 0:
+        return mask
+    footprints = box_footprints(boxes_ego_at_cube_time, calibration, poses, timestamp_ns, *power_db.shape)
+    car = _grown(footprints.in_fov.any(axis=0), LOBE_BINS)
+    mask[_grown(car | footprints.outside_fov.any(axis=0), ERROR_BINS)] = UNCERTAIN
+    mask[car & (power_db > floor_db + params.floor_margin_db)] = MOVING
+    return mask
+
+
+def _grown(cells: np.ndarray, bins: int) -> np.ndarray:
+    """``[R, D]`` bool: ``cells`` grown by ``bins`` in range and Doppler (square; the Doppler axis wraps)."""
+    return scipy.ndimage.maximum_filter(cells, size=2 * bins + 1, mode=["nearest", "wrap"])
+
+
+def cfar_peaks_on_boxes(
+    cube: np.ndarray, cells: RadarCells, timestamp_ns: int, calibration, poses: EgoPoses,
+    boxes_ego_at_cube_time: LabelBoxes, params: MaskParams | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which of a cube's CFAR peaks lie on the labelled cars: the seeds of the CFAR-gated target.
+
+    Parameters
+    ----------
+    cells : RadarCells
+        The cube's CFAR peaks, ``[N]`` (:func:`~zendar_dataset.detection.cfar_map` with ``params.chain``).
+
+    The others as :func:`label_mask`.
+
+    Returns
+    -------
+    on_car : numpy.ndarray
+        ``[N]`` bool: the peak's point lies inside a box grown by :attr:`MaskParams.box_margin_m`
+        and its radial velocity over the ground is that box's car's within
+        :attr:`MaskParams.max_velocity_error_mps` (Doppler compared modulo its span).
+    near_car : numpy.ndarray
+        ``[N]`` bool: not ``on_car`` but within :attr:`MaskParams.near_margin_m` of a box.
+    """
+    params = MaskParams() if params is None else params
     boxes = boxes_ego_at_cube_time
     if len(cells) == 0 or len(boxes) == 0:
-        return mask
+        return np.zeros(len(cells), bool), np.zeros(len(cells), bool)
     points_ego, residual_mps = locate_cells(cube, cells.range_bin, cells.doppler_bin, timestamp_ns, calibration, poses)
     inside = boxes.contains(points_ego[:, :2], params.box_margin_m)  # [P, B]
     near = boxes.contains(points_ego[:, :2], params.near_margin_m).any(axis=1)
@@ -252,10 +354,24 @@ def label_mask(
     fmcw = FmcwParams.from_calibration(calibration, n_samples=cube.shape[0], n_chirps=cube.shape[1])
     span_mps = cube.shape[1] * fmcw.doppler_bin_mps  # Doppler is ambiguous modulo D bins
     error_mps = np.abs((residual_mps[:, None] - expected_mps + span_mps / 2) % span_mps - span_mps / 2)
-    moving = (inside & (error_mps <= params.max_velocity_error_mps)).any(axis=1)
-    uncertain = near & ~moving
-    _paint(mask, power_db, floor_db, cells.range_bin[uncertain], cells.doppler_bin[uncertain], UNCERTAIN, params)
-    _paint(mask, power_db, floor_db, cells.range_bin[moving], cells.doppler_bin[moving], MOVING, params)
+    on_car = (inside & (error_mps <= params.max_velocity_error_mps)).any(axis=1)
+    return on_car, near & ~on_car
+
+
+def cfar_peak_label_mask(
+    cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses, boxes_ego_at_cube_time: LabelBoxes,
+    params: MaskParams | None = None,
+) -> np.ndarray:
+    """The CFAR-gated target of one cube: the CFAR peaks on the cars, grown (module docstring).
+
+    Parameters and return value as :func:`label_mask`.
+    """
+    params = MaskParams() if params is None else params
+    cells, power_db, floor_db = _power_db_and_floor(cube, params)
+    mask = np.full(power_db.shape, BACKGROUND, MASK_DTYPE)
+    on_car, near_car = cfar_peaks_on_boxes(cube, cells, timestamp_ns, calibration, poses, boxes_ego_at_cube_time, params)
+    _paint(mask, power_db, floor_db, cells.range_bin[near_car], cells.doppler_bin[near_car], UNCERTAIN, params)
+    _paint(mask, power_db, floor_db, cells.range_bin[on_car], cells.doppler_bin[on_car], MOVING, params)
     return mask
 
 
@@ -272,9 +388,9 @@ def scene_masks(
     radar : str
         A radar of the scene.
     kind : {"auto", "labels"}
-        Automatic labels (SAR test) or the manual labels' target. For ``"labels"`` each cube takes
-        the boxes of the label frame nearest its time, moved to that time (ego poses and each car's
-        velocity).
+        Automatic labels (SAR test) or the manual labels' target (of the kind
+        ``params.manual_targets``). For ``"labels"`` each cube takes the boxes of the label frame
+        nearest its time, moved to that time (ego poses and each car's velocity).
     sar : SarFrames, optional
         The scene's SAR images when already built (``"auto"``).
     params : MaskParams, optional
