@@ -10,9 +10,17 @@ import pytest
 
 from tests.detection.chain_helpers import T0_NS, parked_poses, radar_calibration, radar_params, sar_frame, sar_frames, simulate_cube
 from zendar_dataset.detection import ChainParams
-from zendar_dataset.detection.boxes import LabelBoxes
 from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
-from zendar_baselines.labels.masks import MaskParams, auto_label_mask, grow_segments, scene_masks
+from zendar_baselines.labels.masks import (
+    MaskParams,
+    auto_label_mask,
+    box_label_mask,
+    cfar_peak_label_mask,
+    cfar_peaks_on_boxes,
+    grow_segments,
+    scene_masks,
+)
+from zendar_dataset.detection import LabelBoxes, cfar_map, cube_power, frame_timestamps, nearest_label_frame
 from zendar_dataset.detection.static_scene import SarTestParams
 from zendar_dataset.detection.locate import locate_cells
 from zendar_dataset.errors import ZendarError
@@ -114,11 +122,12 @@ def _truth_boxes(truth, timestamp_ns: int) -> LabelBoxes:
     )
 
 
-def test_label_masks_mark_cells_that_map_back_inside_the_simulated_cars(tiny_root):
+@pytest.mark.parametrize("manual_targets", ["boxes", "cfar-peaks"])
+def test_label_masks_mark_cells_that_map_back_inside_the_simulated_cars(tiny_root, manual_targets):
     index = open_dataset(tiny_root)
     (scene_id,) = index.scene_ids("train")
     truth = build_scene(PROFILES["tiny"], SEED, int(scene_id.split("-")[1]))
-    params = MaskParams()
+    params = MaskParams(manual_targets=manual_targets)
     with index.open_scene(scene_id) as reader:
         poses = reader.ego_poses()
         labels = reader.labels()
@@ -145,6 +154,40 @@ def test_label_masks_mark_cells_that_map_back_inside_the_simulated_cars(tiny_roo
     assert total >= 20
     # Grown cells may reach past the car by a few range bins or a DOA error; most land on it.
     assert inside / total >= 0.9, f"{inside} of {total} moving cells inside the simulated cars"
+
+
+def test_box_targets_hold_the_simulated_cars_returns_and_the_cells_cfar_missed(tiny_root):
+    # The simulator's own returns of each labelled car: the CFAR peaks that DOA places inside its box
+    # with its radial velocity (the CFAR-gated target's seeds), measured from the simulated cubes.
+    index = open_dataset(tiny_root)
+    (scene_id,) = index.scene_ids("train")
+    params = MaskParams()
+    peaks = {"all": 0, "covered": 0, "moving": 0}
+    moving_cells = {"boxes": 0, "cfar-peaks": 0}
+    with index.open_scene(scene_id) as reader:
+        poses, labels, frames_ns = reader.ego_poses(), reader.labels(), frame_timestamps(reader)
+        for radar in reader.sensors("radar"):
+            calibration = reader.calibration.sensors[radar]
+            cubes = reader.array(f"radar/{radar}/cube")
+            for k, cube_ns in enumerate(reader.timestamps(f"radar/{radar}").tolist()):
+                cube = np.asarray(cubes[k])
+                boxes = LabelBoxes.of_frame(labels, nearest_label_frame(frames_ns, cube_ns)).moved_to(cube_ns, poses)
+                cells = cfar_map(cube_power(cube), params.chain)[0]
+                on_car, _near = cfar_peaks_on_boxes(cube, cells, cube_ns, calibration, poses, boxes, params)
+                new = box_label_mask(cube, cube_ns, calibration, poses, boxes, params)
+                classes = new[cells.range_bin[on_car], cells.doppler_bin[on_car]]
+                peaks["all"] += classes.size
+                peaks["covered"] += int(np.isin(classes, (MOVING, UNCERTAIN)).sum())
+                peaks["moving"] += int((classes == MOVING).sum())
+                moving_cells["boxes"] += int((new == MOVING).sum())
+                old = cfar_peak_label_mask(cube, cube_ns, calibration, poses, boxes, params)
+                moving_cells["cfar-peaks"] += int((old == MOVING).sum())
+    assert peaks["all"] >= 20
+    assert peaks["covered"] == peaks["all"], peaks
+    # The others lie on parts of a car outside the radar's quoted field of view (UNCERTAIN).
+    assert peaks["moving"] >= 0.8 * peaks["all"], peaks
+    # The car's cells CFAR did not pick count too.
+    assert moving_cells["boxes"] > 1.1 * moving_cells["cfar-peaks"], moving_cells
 
 
 def test_scene_masks_refuse_a_scene_without_labels_an_unknown_kind_or_radar(tiny_root):
