@@ -38,7 +38,8 @@ returns fall anywhere between the static scene's Doppler and twice the body's ra
 the ground, a different place in every cube. The box target gives them no Doppler guard band: a band
 that wide would cover the static clutter at the car's range (the negatives the CNN most needs to
 learn), and the simulated rim points (0.05 m² each, ``Imperfections.wheel_rcs_m2``) are 12 dB below
-a body scatterer's median (0.8 m²); the one-bin ring takes the spill of the body's own lobes.
+a body scatterer's median (0.8 m²); the main lobe kept around the footprint takes the spill of the
+body's own returns.
 """
 
 from __future__ import annotations

@@ -139,6 +139,9 @@ def test_the_exact_beat_signal_of_a_car_lands_on_its_footprint():
     old = cfar_peak_label_mask(cube, CUBE_NS, calibration, poses, boxes, params)
     assert (old == MOVING).sum() >= 1
     assert (mask == MOVING).sum() > (old == MOVING).sum()
+    # Another box over the same cells, with nothing above the floor of its own, cannot undo a MOVING cell.
+    ghost = _boxes([14.0, 14.0], [2.0, 2.0], [4.5, 6.0], [1.8, 2.5], [heading, heading], *np.tile(car_velocity[:, None], 2))
+    assert _cells(mask == MOVING) <= _cells(box_label_mask(cube, CUBE_NS, calibration, poses, ghost, params) == MOVING)
     # Without boxes nothing is a car, and label_mask follows manual_targets.
     assert not box_label_mask(cube, CUBE_NS, calibration, poses, _boxes(*[[]] * 7)).any()
     assert np.array_equal(label_mask(cube, CUBE_NS, calibration, poses, boxes, params), mask)
