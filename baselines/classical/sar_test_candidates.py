@@ -27,13 +27,22 @@ Prints a markdown table of ROC AUC per band and overall for each split.
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import sys
 
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
-from zendar_dataset.detection import ON_CAR_MARGIN_M, ChainParams, LabelBoxes, cfar_map, cube_power, frame_cube_points, to_frame
+from zendar_dataset.detection import (
+    ON_CAR_MARGIN_M,
+    ChainParams,
+    LabelBoxes,
+    cfar_map,
+    cube_power,
+    frame_cube_points,
+    to_frame,
+)
 from zendar_dataset.detection.static_scene import nearest_frames
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import ALL_BAND, BANDS_M, RANGE_BANDS
@@ -65,7 +74,7 @@ class _ImageStatistics:
             order = np.argsort(ring, axis=None)
             sorted_ring, sorted_magnitude = ring.ravel()[order], magnitude.ravel()[order]
             bounds = np.searchsorted(sorted_ring, np.arange(ring.max() + 2))
-            median = np.array([np.median(sorted_magnitude[a:b]) if b > a else np.nan for a, b in zip(bounds[:-1], bounds[1:])])
+            median = np.array([np.median(sorted_magnitude[a:b]) if b > a else np.nan for a, b in itertools.pairwise(bounds)])
             self._rings = {(sensor, frame): (range_m, median)}
         return self._rings[(sensor, frame)]
 
@@ -121,34 +130,38 @@ def candidate_values(root: str | os.PathLike, split: str, params: ChainParams | 
     columns: dict[str, list[np.ndarray]] = {name: [] for name in (*CANDIDATES, "on_car", "range_m")}
     for scene_id in index.scene_ids(split):
         with index.open_scene(scene_id) as reader:
-            labels = reader.labels()
-            if labels is None:
-                continue
-            poses, sar = reader.ego_poses(), SarFrames(reader)
-            mounts = {sensor: ego_T_sensor(reader.calibration.sensors[sensor]).translation for sensor in sar.sensors}
-            statistics = _ImageStatistics(sar, lambda sensor, t_ns: poses.ego_to_ecef(np.asarray(mounts[sensor])[None], t_ns)[0])
-            maps_of: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # a cube's power and CA noise maps
-
-            def cells_of(radar, k, cube):
-                power = cube_power(cube)
-                cells, noise = cfar_map(power, params)
-                maps_of[_cube_key(int(reader.timestamps(f"radar/{radar}")[k]), ego_T_sensor(reader.calibration.sensors[radar]).translation)] = (power, noise)
-                return cells
-
-            per_cube: dict[tuple, dict[str, np.ndarray]] = {}
-            for frame_ns, found in frame_cube_points(reader, cells_of, params, poses=poses, sar=sar):
-                boxes = LabelBoxes.of_frame(labels, frame_ns)
-                for cube in found:
-                    key = _cube_key(cube.timestamp_ns, cube.radar_ego)
-                    if key not in per_cube:
-                        per_cube[key] = _cube_candidates(cube, statistics, maps_of.pop(key), params)
-                    for name, values in per_cube[key].items():
-                        columns[name].append(values)
-                    columns["on_car"].append(boxes.moved_to(cube.timestamp_ns, poses).contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1))
-                    columns["range_m"].append(np.hypot(*to_frame(cube, poses, frame_ns).points_xy.T))
+            if reader.labels() is not None:
+                _scene_candidates(reader, params, columns)
     if not columns["on_car"]:
         raise ZendarError(f"{root}: split {split!r} has no labelled scene")
     return {name: np.concatenate(values) for name, values in columns.items()}
+
+
+def _scene_candidates(reader, params: ChainParams, columns: dict[str, list[np.ndarray]]) -> None:
+    """Append one labelled scene's points to ``columns`` (:func:`candidate_values`)."""
+    labels, poses, sar = reader.labels(), reader.ego_poses(), SarFrames(reader)
+    mounts = {sensor: ego_T_sensor(reader.calibration.sensors[sensor]).translation for sensor in sar.sensors}
+    statistics = _ImageStatistics(sar, lambda sensor, t_ns: poses.ego_to_ecef(np.asarray(mounts[sensor])[None], t_ns)[0])
+    maps_of: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # a cube's power and CA noise maps
+
+    def cells_of(radar, k, cube):
+        power = cube_power(cube)
+        cells, noise = cfar_map(power, params)
+        mount = ego_T_sensor(reader.calibration.sensors[radar]).translation
+        maps_of[_cube_key(int(reader.timestamps(f"radar/{radar}")[k]), mount)] = (power, noise)
+        return cells
+
+    per_cube: dict[tuple, dict[str, np.ndarray]] = {}
+    for frame_ns, found in frame_cube_points(reader, cells_of, params, poses=poses, sar=sar):
+        boxes = LabelBoxes.of_frame(labels, frame_ns)
+        for cube in found:
+            key = _cube_key(cube.timestamp_ns, cube.radar_ego)
+            if key not in per_cube:
+                per_cube[key] = _cube_candidates(cube, statistics, maps_of.pop(key), params)
+            for name, values in per_cube[key].items():
+                columns[name].append(values)
+            columns["on_car"].append(boxes.moved_to(cube.timestamp_ns, poses).contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1))
+            columns["range_m"].append(np.hypot(*to_frame(cube, poses, frame_ns).points_xy.T))
 
 
 def _cube_key(timestamp_ns: int, radar_ego) -> tuple:
@@ -163,8 +176,7 @@ def _cube_candidates(cube, statistics: _ImageStatistics, maps: tuple[np.ndarray,
     for sensor, frame in nearest_frames(statistics.sar, cube.timestamp_ns, params.sar.max_frame_gap_ns).items():
         read = statistics.read(sensor, frame, points_ecef)
         brighter = np.isfinite(read["peak"]) & ~(read["peak"] <= best["peak"])  # NaN best: any reading is brighter
-        for name in best:
-            best[name] = np.where(brighter, read[name], best[name])
+        best = {name: np.where(brighter, read[name], value) for name, value in best.items()}
     power, noise = maps
     power_db = 10.0 * np.log10(power[cube.range_bin, cube.doppler_bin])
     snr_db = power_db - 10.0 * np.log10(noise[cube.range_bin, cube.doppler_bin])

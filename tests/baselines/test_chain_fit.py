@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from zendar_baselines.classical.chain_fit import LabelledFrames, point_separation, separation_auc
+from zendar_baselines.classical.chain_fit import (
+    LabelledFrames,
+    point_separation,
+    separation_auc,
+)
 
 
 def _frames(sar_db, on_car, range_m) -> LabelledFrames:

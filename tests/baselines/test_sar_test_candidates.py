@@ -5,9 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from zendar_baselines.classical.chain_fit import labelled_frames
-from zendar_baselines.classical.sar_test_candidates import CANDIDATES, auc_table, candidate_values, main
+from zendar_baselines.classical.sar_test_candidates import (
+    CANDIDATES,
+    auc_table,
+    candidate_values,
+    main,
+)
+
 from zendar_dataset.sim.generate import synthesize_dataset
 from zendar_dataset.sim.profiles import get_profile
 

@@ -30,7 +30,12 @@ from tests.detection.chain_helpers import (
 )
 from zendar_dataset.detection.cells import RadarCells, cfar_cells
 from zendar_dataset.detection.points import cell_snr_db, cube_points
-from zendar_dataset.detection.static_scene import SarTestParams, is_dynamic, nearest_frames, sar_db_at
+from zendar_dataset.detection.static_scene import (
+    SarTestParams,
+    is_dynamic,
+    nearest_frames,
+    sar_db_at,
+)
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M
 
@@ -88,7 +93,7 @@ def test_a_static_scatterer_reads_static_and_a_mover_dynamic_at_8_m_and_at_45_m_
     static_xy, moving_xy = [(8.0, 6.0), (45.0, -6.0)], [(8.0, -6.0), (45.0, 6.0)]
 
     def pixel(x, y):
-        return int(round((x - 4.0) / RANGE_PIXEL_M)), int(round((y + 20.0) / RANGE_PIXEL_M))
+        return round((x - 4.0) / RANGE_PIXEL_M), round((y + 20.0) / RANGE_PIXEL_M)
 
     for x, y in static_xy:
         image[pixel(x, y)] = math.sqrt(10 ** ((_snr_db(math.hypot(x, y)) + SAR_GAIN_DB) / 10))
@@ -189,7 +194,7 @@ def test_cube_points_subtract_each_cells_own_snr_from_its_sar_reading():
 
 
 def test_bad_settings_and_points_raise_named_errors(scene):
-    poses, sar = scene
+    _, sar = scene
     with pytest.raises(ZendarError, match="threshold_db"):
         SarTestParams(threshold_db=float("nan"))
     with pytest.raises(ZendarError, match="max_frame_gap_ns"):
