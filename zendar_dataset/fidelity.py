@@ -13,8 +13,9 @@ evaluator (near [0, 15), mid [15, 30), far [30, 60) m of r = sqrt(x² + y²) in 
   car's box grown by :data:`ON_CAR_MARGIN_M`; truth boxes where the truth is known, else labels)
   and static ones, and how well two tests separate them (ROC AUC, ``sklearn.metrics.roc_auc_score``):
   the paper's SAR mask (a detection projecting onto a dark SAR pixel is moving, §2.3), read exactly as
-  the baselines read it (:func:`zendar_dataset.detection.static_scene.sar_db_at`: the SAR frame
-  nearest the cube's time within 150 ms, brightest pixel near the point), and the plain
+  the baselines read it (:func:`zendar_dataset.detection.static_scene.sar_db_at`: the brightest
+  pixel near the point in the SAR frame nearest the cube's time within 150 ms, minus the
+  detection's range-Doppler SNR), and the plain
   Doppler test (measured radial velocity against a static point's at that azimuth);
 - the CFAR detection rate (labelled cars with at least one CFAR detection on them) and the AP of
   :mod:`zendar_dataset.detection.classical` under the official evaluator.
@@ -210,8 +211,10 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
                 label_hit |= _in_boxes(points[:, :2], np.stack([x, y], 1) + np.stack([labels["vx"][rows], labels["vy"][rows]], 1) * dt,
                                        labels["length"][rows], labels["width"][rows], labels["yaw"][rows]).any(axis=0)
             # The baselines' own static-scene reading of each point (the SAR frame nearest the cube).
+            with np.errstate(divide="ignore"):
+                snr_db = 10.0 * np.log10(found.snr)
             sar_db = sar_db_at(sar, poses.ecef_T_ego(cube_ns).transform_points(found.points_ego), cube_ns,
-                               max_frame_gap_ns=SarTestParams().max_frame_gap_ns)
+                               rd_snr_db=snr_db, max_frame_gap_ns=SarTestParams().max_frame_gap_ns)
             tally.band.extend(_band(np.hypot(points[:, 0], points[:, 1])).tolist())
             tally.on_car.extend(on_car.tolist())
             tally.sar_db.extend(sar_db.tolist())

@@ -4,11 +4,14 @@
     python -m zendar_baselines.classical.chain_fit ROOT [--split train] [--sweep]   (the same)
 
 1. The SAR test's threshold (:attr:`zendar_dataset.detection.SarTestParams.threshold_db`): the
-   test classifies points, so its threshold is the one that best separates the CFAR points inside
-   labelled boxes from the others by the SAR value (Youden's J, the largest true-positive minus
-   false-positive rate), rounded to 0.5 dB. The automatic labels need exactly that separation; a
-   threshold tuned for the detector's AP instead would be a different method (``--sweep`` reports
-   the chain's AP over a grid of thresholds, for reference).
+   test classifies points, so its threshold is the one that best finds the CFAR points inside
+   labelled boxes among the others by the SAR value: the largest F1 score (harmonic mean of the
+   precision and recall of the points it calls dynamic), rounded to 0.5 dB. The automatic labels are
+   judged by exactly that precision and recall. Youden's J (true-positive minus false-positive
+   rate), the criterion before, is reported too: it ignores that other points outnumber on-car ones
+   about ten to one and so accepts many false moving points (docs/baselines.md). A threshold tuned
+   for the detector's AP instead would be a different method (``--sweep`` reports the chain's AP
+   over a grid of thresholds, for reference).
 2. The centre offset (:attr:`zendar_dataset.detection.ChainParams.centre_offset_m`): the
    radar sees a car's near face, so a cluster's centre falls short of the labelled centre along the
    line of sight. The offset is the median, over clusters whose uncorrected centre lies within
@@ -24,7 +27,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from sklearn.metrics import roc_auc_score, roc_curve
+from sklearn.metrics import precision_recall_curve, roc_auc_score, roc_curve
 from tqdm import tqdm
 
 from zendar_dataset.detection import (
@@ -40,6 +43,7 @@ from zendar_dataset.detection import (
 )
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate_record
+from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import open_dataset
 
@@ -47,7 +51,8 @@ from zendar_dataset.format.reader import open_dataset
 # length, so that clusters short by half a car's depth (and the lag of a cube up to 0.1 s older than
 # the frame) are not cut off, while neighbouring cars (lanes 3.5 m apart) rarely are taken.
 OFFSET_MATCH_RADIUS_M = 4.0
-THRESHOLD_GRID_DB = np.arange(0.0, 60.0 + 0.5, 1.0)
+# The SAR values of CFAR points on the demo's training split span about -25 to 65 dB (1st to 99th percentile).
+THRESHOLD_GRID_DB = np.arange(-40.0, 70.0 + 0.5, 1.0)
 
 
 @dataclass
@@ -65,12 +70,16 @@ class LabelledFrames:
     on_car : numpy.ndarray
         ``[P]`` bool: the point lies inside a labelled box (moved to the cube's time) grown by
         :data:`zendar_dataset.detection.boxes.ON_CAR_MARGIN_M`.
+    range_m : numpy.ndarray
+        ``[P]`` float64 the point's distance from the ego origin in its frame's ego frame, metres
+        (the evaluator's range, which decides its band).
     """
 
     points: dict[str, FramePoints]
     labels: dict[str, np.ndarray]
     sar_db: np.ndarray
     on_car: np.ndarray
+    range_m: np.ndarray
 
 
 def labelled_frames(root: str | os.PathLike, split: str, params: ChainParams | None = None, progress: bool = True) -> LabelledFrames:
@@ -85,7 +94,7 @@ def labelled_frames(root: str | os.PathLike, split: str, params: ChainParams | N
     index = open_dataset(root)
     points: dict[str, FramePoints] = {}
     labels_xy: dict[str, np.ndarray] = {}
-    sar_db, on_car = [], []
+    sar_db, on_car, range_m = [], [], []
     scene_ids = index.scene_ids(split)
     for scene_id in tqdm(scene_ids, desc=f"chain_fit {split}", unit="scene", disable=not progress):
         with index.open_scene(scene_id) as reader:
@@ -95,16 +104,18 @@ def labelled_frames(root: str | os.PathLike, split: str, params: ChainParams | N
             poses = reader.ego_poses()
             for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
                 boxes = LabelBoxes.of_frame(labels, frame_ns)
-                for cube in found:
+                in_frame = [to_frame(cube, poses, frame_ns) for cube in found]
+                for cube, moved in zip(found, in_frame):
                     at_cube = boxes.moved_to(cube.timestamp_ns, poses)
                     on_car.append(at_cube.contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1))
                     sar_db.append(cube.sar_db)
+                    range_m.append(np.hypot(moved.points_xy[:, 0], moved.points_xy[:, 1]))
                 fid = frame_id(scene_id, frame_ns)
-                points[fid] = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
+                points[fid] = FramePoints.concatenate(in_frame)
                 labels_xy[fid] = np.stack([boxes.x, boxes.y], axis=1)
     if not labels_xy:
         raise ZendarError(f"{root}: split {split!r} has no labelled scene to fit the detection chain on")
-    return LabelledFrames(points, labels_xy, np.concatenate(sar_db), np.concatenate(on_car))
+    return LabelledFrames(points, labels_xy, np.concatenate(sar_db), np.concatenate(on_car), np.concatenate(range_m))
 
 
 def centre_offset_m(frames: LabelledFrames, params: ChainParams) -> float | None:
@@ -134,15 +145,65 @@ def chain_ap(frames: LabelledFrames, params: ChainParams) -> dict[str, float | N
     return dict(evaluate_record({"meta": {"method": "chain_fit"}, "results": results}, {"frames": truth}).ap)
 
 
-def point_separation(frames: LabelledFrames) -> dict[str, float | None]:
-    """ROC AUC of the SAR value for on-car against other CFAR points, and the Youden-J threshold (dB)."""
-    keep = np.isfinite(frames.sar_db)
-    truth, value = frames.on_car[keep], frames.sar_db[keep]
+def separation_auc(on_car: np.ndarray, sar_db: np.ndarray) -> float | None:
+    """ROC AUC of a low SAR value for on-car points against the others; NaN values left out.
+
+    Parameters
+    ----------
+    on_car : numpy.ndarray
+        ``[P]`` bool.
+    sar_db : numpy.ndarray
+        ``[P]`` float64 SAR values, dB.
+
+    Returns
+    -------
+    float or None
+        None when the finite values are all on cars or all off them.
+    """
+    keep = np.isfinite(sar_db)
+    truth = np.asarray(on_car, bool)[keep]
     if truth.all() or not truth.any():
-        return {"auc": None, "youden_threshold_db": None}
-    fpr, tpr, thresholds = roc_curve(truth, -value)
-    best = int(np.argmax(tpr - fpr))
-    return {"auc": float(roc_auc_score(truth, -value)), "youden_threshold_db": float(-thresholds[best])}
+        return None
+    return float(roc_auc_score(truth, -np.asarray(sar_db, np.float64)[keep]))
+
+
+def point_separation(frames: LabelledFrames) -> dict[str, Any]:
+    """How well the SAR value separates on-car from other CFAR points, overall and per range band.
+
+    Returns
+    -------
+    dict
+        ``auc``: ROC AUC over every point with a SAR value (low values say "on a car");
+        ``f1_threshold_db``: the value whose "dynamic below it" has the largest F1 score on the
+        on-car points (the fitted threshold); ``youden_threshold_db``: the value that maximises the
+        true-positive minus false-positive rate; ``auc_per_band``: band name
+        (:data:`zendar_dataset.eval.protocol.RANGE_BANDS`) ->
+        the AUC of the points in that band of the evaluator's range (``frames.range_m``);
+        ``points_per_band``: band -> ``{"on_car", "other"}`` counts of points with a SAR value.
+        An AUC or threshold is None where a set lacks on-car or other points.
+    """
+    finite = np.isfinite(frames.sar_db)
+    auc_per_band, points_per_band = {}, {}
+    for band in RANGE_BANDS:
+        low, high = BANDS_M[band]
+        in_band = (frames.range_m >= low) & (frames.range_m < high)
+        auc_per_band[band] = separation_auc(frames.on_car[in_band], frames.sar_db[in_band])
+        points_per_band[band] = {
+            "on_car": int(np.count_nonzero(in_band & finite & frames.on_car)),
+            "other": int(np.count_nonzero(in_band & finite & ~frames.on_car)),
+        }
+    auc = separation_auc(frames.on_car, frames.sar_db)
+    youden = f1 = None
+    if auc is not None:
+        fpr, tpr, thresholds = roc_curve(frames.on_car[finite], -frames.sar_db[finite])
+        youden = float(-thresholds[int(np.argmax(tpr - fpr))])
+        precision, recall, cuts = precision_recall_curve(frames.on_car[finite], -frames.sar_db[finite])
+        score = 2.0 * precision[:-1] * recall[:-1] / np.maximum(precision[:-1] + recall[:-1], np.finfo(float).tiny)
+        f1 = float(-cuts[int(np.argmax(score))])
+    return {
+        "auc": auc, "f1_threshold_db": f1, "youden_threshold_db": youden, "auc_per_band": auc_per_band,
+        "points_per_band": points_per_band,
+    }
 
 
 def fit_chain_params(
@@ -169,7 +230,8 @@ def fit_chain_params(
     params : ChainParams
         ``base`` with the fitted ``sar.threshold_db`` and ``centre_offset_m``.
     summary : dict
-        The fit's figures: counts, the point separation (ROC AUC, Youden threshold), the chosen
+        The fit's figures: counts, the point separation (ROC AUC overall and per band, F1 and
+        Youden thresholds, :func:`point_separation`), the chosen
         values with the chain's AP on the split, and the sweep when asked.
 
     Raises
@@ -182,9 +244,9 @@ def fit_chain_params(
     base = ChainParams() if base is None else base
     frames = labelled_frames(root, split, base, progress)
     separation = point_separation(frames)
-    if separation["youden_threshold_db"] is None:
+    if separation["f1_threshold_db"] is None:
         raise ZendarError(f"{root}: split {split!r} needs CFAR points both on and off labelled cars to fit the SAR threshold")
-    sar = replace(base.sar, threshold_db=round(2.0 * separation["youden_threshold_db"]) / 2.0)
+    sar = replace(base.sar, threshold_db=round(2.0 * separation["f1_threshold_db"]) / 2.0)
     offset = centre_offset_m(frames, replace(base, sar=sar, centre_offset_m=0.0))
     params = replace(base, sar=sar, centre_offset_m=0.0 if offset is None else round(offset, 2))
     summary: dict[str, Any] = {

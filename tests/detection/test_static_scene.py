@@ -1,9 +1,15 @@
-"""The static-scene test on hand-made SAR images whose readings follow from the noise statistics.
+"""The static-scene test on hand-made SAR images and range-Doppler SNRs that follow the radar equation.
 
 The image is unit complex Gaussian noise (``E|n|² = 1``; the median magnitude is ``sqrt(ln 2)``)
 with bright single pixels. A point on a bright pixel of amplitude ``A`` reads
 ``20 log10(A / sqrt(ln 2))`` dB; a point on noise reads the largest of the ``n`` pixels of its
-window, whose median is ``ln(n / ln 2) / ln 2`` in power over the median pixel's.
+window, whose median is ``ln(n / ln 2) / ln 2`` in power over the median pixel's. The test's value
+is that reading minus the point's range-Doppler SNR.
+
+Physics of the range test: a scatterer of the same RCS returns ``SNR(R) = SNR(10 m) - 40 log10(R /
+10 m)`` in the range-Doppler map (radar equation, power ∝ R⁻⁴) and, when static, a SAR pixel of
+that power times the aperture's integration gain (the images are not range-compensated); a moving
+car's SAR energy is spread over a patch of pixels as speckle.
 """
 
 from __future__ import annotations
@@ -13,14 +19,37 @@ import math
 import numpy as np
 import pytest
 
-from tests.detection.chain_helpers import T0_NS, parked_poses, sar_frame, sar_frames
-from zendar_dataset.detection.static_scene import SarTestParams, is_dynamic, nearest_frames, sar_db_at
+from tests.detection.chain_helpers import (
+    T0_NS,
+    parked_poses,
+    radar_calibration,
+    radar_params,
+    sar_frame,
+    sar_frames,
+    simulate_cube,
+)
+from zendar_dataset.detection.cells import RadarCells, cfar_cells
+from zendar_dataset.detection.points import cell_snr_db, cube_points
+from zendar_dataset.detection.static_scene import (
+    SarTestParams,
+    is_dynamic,
+    nearest_frames,
+    sar_db_at,
+)
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M
 
 PIXEL_M = 0.1
 WALL_AMPLITUDE = 100.0
 WALL_Y_M = 5.0
+MEDIAN_DB = 10 * math.log10(math.log(2))  # the median pixel's power over the mean noise power, dB
+# Range test: a car-sized RCS gives 40 dB at 10 m in the range-Doppler map; the aperture's coherent gain
+# over that SNR is 30 dB (what static points read over their SNR on the demo's training split, median
+# 31 dB); a mover's energy is smeared over 30 x 30 pixels of 0.25 m.
+SNR_AT_10_M_DB = 40.0
+SAR_GAIN_DB = 30.0
+SMEAR_PIXELS = 30
+RANGE_PIXEL_M = 0.25
 
 
 @pytest.fixture(scope="module")
@@ -36,18 +65,77 @@ def _ecef(poses, points_xy):
     return poses.ego_to_ecef(np.column_stack([points, np.zeros(len(points))]), T0_NS)
 
 
-def test_a_wall_reads_bright_a_car_on_noise_reads_the_noise_maximum_and_outside_is_nan(scene):
+def _snr_db(range_m: float) -> float:
+    return SNR_AT_10_M_DB - 40.0 * math.log10(range_m / 10.0)
+
+
+def test_the_value_is_the_sar_reading_minus_the_snr_and_outside_is_nan(scene):
     poses, sar = scene
     points = _ecef(poses, [(20.0, WALL_Y_M), (20.0, -3.0), (50.0, 0.0)])  # on the wall, a car on the road, beyond the image
-    sar_db = sar_db_at(sar, points, T0_NS)
-    assert sar_db[0] == pytest.approx(20 * math.log10(WALL_AMPLITUDE / math.sqrt(math.log(2))), abs=0.5)
+    reading_db = sar_db_at(sar, points, T0_NS, rd_snr_db=np.zeros(3))
+    assert reading_db[0] == pytest.approx(20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB, abs=0.5)
     k = round(SAR_SEARCH_RADIUS_M / PIXEL_M)
     n = (2 * k + 1) ** 2
     noise_max_db = 10 * math.log10(math.log(n / math.log(2)) / math.log(2))
-    assert sar_db[1] == pytest.approx(noise_max_db, abs=3.0)  # one draw of the maximum of n exponentials
-    assert np.isnan(sar_db[2])
-    dynamic = is_dynamic(sar_db, SarTestParams(threshold_db=20.0))
-    assert dynamic.tolist() == [False, True, False]  # outside every image: not confirmed, not dynamic
+    assert reading_db[1] == pytest.approx(noise_max_db, abs=3.0)  # one draw of the maximum of n exponentials
+    assert np.isnan(reading_db[2])
+    snr_db = np.array([12.0, -4.0, 30.0])
+    np.testing.assert_allclose(sar_db_at(sar, points, T0_NS, rd_snr_db=snr_db), reading_db - snr_db)
+
+
+def test_a_static_scatterer_reads_static_and_a_mover_dynamic_at_8_m_and_at_45_m_where_no_absolute_level_can():
+    """Same RCS, R⁻⁴ falloff: the value is the same at both ranges; the reading alone orders a far static
+    point below a near mover."""
+    poses = parked_poses()
+    rng = np.random.default_rng(7)
+    frame = sar_frame(poses, (4.0, -20.0), RANGE_PIXEL_M, (200, 160), [], 0.0, seed=3)  # x 4-54 m, y -20-20 m
+    image = frame["image"][0]
+    static_xy, moving_xy = [(8.0, 6.0), (45.0, -6.0)], [(8.0, -6.0), (45.0, 6.0)]
+
+    def pixel(x, y):
+        return round((x - 4.0) / RANGE_PIXEL_M), round((y + 20.0) / RANGE_PIXEL_M)
+
+    for x, y in static_xy:
+        image[pixel(x, y)] = math.sqrt(10 ** ((_snr_db(math.hypot(x, y)) + SAR_GAIN_DB) / 10))
+    for x, y in moving_xy:  # the same energy spread over SMEAR_PIXELS² pixels, as speckle
+        i, j = pixel(x, y)
+        power = 10 ** ((_snr_db(math.hypot(x, y)) + SAR_GAIN_DB) / 10) / SMEAR_PIXELS**2
+        patch = (rng.standard_normal((SMEAR_PIXELS, SMEAR_PIXELS)) + 1j * rng.standard_normal((SMEAR_PIXELS, SMEAR_PIXELS))) / math.sqrt(2)
+        half = SMEAR_PIXELS // 2
+        image[i - half:i + half, j - half:j + half] += (math.sqrt(power) * patch).astype(np.complex64)
+    sar = sar_frames(front=frame)
+    xy = static_xy + moving_xy
+    points = _ecef(poses, xy)
+    snr_db = np.array([_snr_db(math.hypot(x, y)) for x, y in xy])
+
+    values = sar_db_at(sar, points, T0_NS, rd_snr_db=snr_db)
+    # A static scatterer reads the aperture's gain over the median at any range.
+    np.testing.assert_allclose(values[:2], SAR_GAIN_DB - MEDIAN_DB, atol=1.0)
+    # A threshold halfway (in dB) between a focused and a smeared scatterer's level holds at every range.
+    params = SarTestParams(threshold_db=SAR_GAIN_DB - 10 * math.log10(SMEAR_PIXELS**2) / 2)
+    assert is_dynamic(values, params).tolist() == [False, False, True, True]
+    # The SAR reading alone: the near mover is brighter than the far static scatterer, so one threshold
+    # on it calls the near mover static or the far scatterer dynamic.
+    reading_db = sar_db_at(sar, points, T0_NS, rd_snr_db=np.zeros(4))
+    assert reading_db[2] > reading_db[1]
+
+
+def test_a_point_at_the_image_edge_reads_the_clipped_window_and_one_off_the_image_is_nan():
+    poses = parked_poses()
+    corner = (10.0, -10.0)
+    sar = sar_frames(front=sar_frame(poses, corner, PIXEL_M, (50, 50), [corner], WALL_AMPLITUDE))
+    points = _ecef(poses, [corner, (corner[0] - 0.6 * PIXEL_M, corner[1])])
+    values = sar_db_at(sar, points, T0_NS, rd_snr_db=np.array([20.0, 20.0]))
+    assert values[0] == pytest.approx(20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB - 20.0, abs=0.5)
+    assert np.isnan(values[1])
+
+
+def test_points_without_a_finite_snr_read_nan_and_no_points_read_nothing(scene):
+    poses, sar = scene
+    points = _ecef(poses, [(20.0, WALL_Y_M)] * 3)
+    values = sar_db_at(sar, points, T0_NS, rd_snr_db=np.array([np.nan, np.inf, -np.inf]))
+    assert np.isnan(values).all() and not is_dynamic(values).any()
+    assert sar_db_at(sar, np.zeros((0, 3)), T0_NS, rd_snr_db=np.zeros(0)).shape == (0,)
 
 
 def test_a_point_within_the_search_radius_of_a_bright_pixel_is_static_and_one_beyond_is_not(scene):
@@ -55,9 +143,10 @@ def test_a_point_within_the_search_radius_of_a_bright_pixel_is_static_and_one_be
     k = round(SAR_SEARCH_RADIUS_M / PIXEL_M)
     inside = _ecef(poses, [(20.0, WALL_Y_M - k * PIXEL_M)])
     beyond = _ecef(poses, [(20.0, WALL_Y_M - (k + 2) * PIXEL_M)])
-    params = SarTestParams(threshold_db=20.0)
-    assert not is_dynamic(sar_db_at(sar, inside, T0_NS), params)[0]
-    assert is_dynamic(sar_db_at(sar, beyond, T0_NS), params)[0]
+    params = SarTestParams(threshold_db=10.0)
+    snr_db = np.array([10.0])  # the wall reads 40 dB over the median
+    assert not is_dynamic(sar_db_at(sar, inside, T0_NS, rd_snr_db=snr_db), params)[0]
+    assert is_dynamic(sar_db_at(sar, beyond, T0_NS, rd_snr_db=snr_db), params)[0]
 
 
 def test_the_brightest_sensor_wins_and_frames_too_far_in_time_are_not_read():
@@ -67,10 +156,11 @@ def test_the_brightest_sensor_wins_and_frames_too_far_in_time_are_not_read():
     bright = sar_frame(poses, (10.0, -10.0), PIXEL_M, (200, 200), [point], WALL_AMPLITUDE, seed=2)
     sar = sar_frames(left=dark, right=bright)
     points = _ecef(poses, [point])
-    assert sar_db_at(sar, points, T0_NS)[0] == pytest.approx(20 * math.log10(WALL_AMPLITUDE / math.sqrt(math.log(2))), abs=0.5)
+    zero = np.zeros(1)
+    assert sar_db_at(sar, points, T0_NS, rd_snr_db=zero)[0] == pytest.approx(20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB, abs=0.5)
     assert nearest_frames(sar, T0_NS + 100_000_000, 150_000_000) == {"left": 0, "right": 0}
     assert nearest_frames(sar, T0_NS + 200_000_000, 150_000_000) == {}
-    assert np.isnan(sar_db_at(sar, points, T0_NS + 200_000_000, max_frame_gap_ns=150_000_000)[0])
+    assert np.isnan(sar_db_at(sar, points, T0_NS + 200_000_000, rd_snr_db=zero, max_frame_gap_ns=150_000_000)[0])
 
 
 def test_the_threshold_is_strict_and_nan_is_never_dynamic():
@@ -78,11 +168,38 @@ def test_the_threshold_is_strict_and_nan_is_never_dynamic():
     assert is_dynamic(np.array([9.99, 10.0, 10.01, np.nan, -np.inf]), params).tolist() == [True, False, False, False, True]
 
 
+def test_a_cells_snr_is_its_power_over_the_training_cells_mean():
+    """A uniform power map with one cell 100 times brighter: 20 dB there, 0 dB far from it."""
+    n_range, n_doppler, n_antennas = 64, 32, 4
+    amplitude = np.full((n_range, n_doppler, n_antennas), 1.0 / math.sqrt(n_antennas), np.complex64)  # power 1 per cell
+    amplitude[30, 16] *= 10.0
+    cells = RadarCells(np.array([30, 5]), np.array([16, 3]), np.array([0.5, 0.5]))
+    np.testing.assert_allclose(cell_snr_db(amplitude, cells), [20.0, 0.0], atol=1e-5)
+    assert cell_snr_db(amplitude, RadarCells(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))).shape == (0,)
+
+
+def test_cube_points_subtract_each_cells_own_snr_from_its_sar_reading():
+    params = radar_params(n_samples=128)
+    calibration = radar_calibration(params, 0.0, (0.0, 0.0, 0.0))
+    cube = simulate_cube(params, np.array([[18.0, 0.0, 0.0]]), np.zeros((1, 3)), [1.0], noise=1e-2)
+    cells = cfar_cells(cube)
+    strongest = int(np.argmax(cells.score))
+    poses = parked_poses()
+    first = cube_points(cube, cells, T0_NS, calibration, poses, sar_frames())
+    bright_xy = tuple(first.points_ego[strongest, :2])
+    sar = sar_frames(front=sar_frame(poses, (10.0, -10.0), PIXEL_M, (200, 200), [bright_xy], WALL_AMPLITUDE))
+    points = cube_points(cube, cells, T0_NS, calibration, poses, sar)
+    expected = 20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB - 10 * math.log10(cells.score[strongest])
+    assert points.sar_db[strongest] == pytest.approx(expected, abs=0.5)
+
+
 def test_bad_settings_and_points_raise_named_errors(scene):
-    poses, sar = scene
+    _, sar = scene
     with pytest.raises(ZendarError, match="threshold_db"):
         SarTestParams(threshold_db=float("nan"))
     with pytest.raises(ZendarError, match="max_frame_gap_ns"):
         SarTestParams(max_frame_gap_ns=-1)
     with pytest.raises(ZendarError, match=r"points_ecef must be \[N, 3\]"):
-        sar_db_at(sar, np.zeros((4, 2)), T0_NS)
+        sar_db_at(sar, np.zeros((4, 2)), T0_NS, rd_snr_db=np.zeros(4))
+    with pytest.raises(ZendarError, match=r"rd_snr_db must be \[N\] with N = 4"):
+        sar_db_at(sar, np.zeros((4, 3)), T0_NS, rd_snr_db=np.zeros(3))

@@ -36,7 +36,7 @@ from zendar_dataset.detection.cells import RadarCells, cfar_cells, cfar_map, cub
 from zendar_dataset.detection.clusters import Cluster, cluster_labels, frame_clusters, frame_detections
 from zendar_dataset.detection.locate import locate_cells, mount_velocity_ego
 from zendar_dataset.detection.params import CFAR_PFA, CLUSTER_EPS_M, DEFAULT_CENTRE_OFFSET_M, ChainParams
-from zendar_dataset.detection.points import CubePoints, FramePoints, cube_points, to_frame
+from zendar_dataset.detection.points import CubePoints, FramePoints, cell_snr_db, cube_points, to_frame
 from zendar_dataset.detection.scene import frame_cube_points, frame_timestamps, latest_cube
 from zendar_dataset.detection.static_scene import (
     DEFAULT_MAX_FRAME_GAP_NS,
@@ -50,7 +50,7 @@ from zendar_dataset.detection.static_scene import (
 __all__ = [
     "CFAR_PFA", "CLUSTER_EPS_M", "DEFAULT_CENTRE_OFFSET_M", "DEFAULT_MAX_FRAME_GAP_NS", "DEFAULT_THRESHOLD_DB",
     "ON_CAR_MARGIN_M", "ChainParams", "Cluster", "CubePoints", "FramePoints", "LabelBoxes", "RadarCells",
-    "SarTestParams", "cfar_cells", "cfar_map", "cluster_labels", "cube_points", "cube_power", "frame_clusters",
+    "SarTestParams", "cell_snr_db", "cfar_cells", "cfar_map", "cluster_labels", "cube_points", "cube_power", "frame_clusters",
     "frame_cube_points", "frame_detections", "frame_timestamps", "is_dynamic", "latest_cube", "locate_cells",
     "mask_cells", "mount_velocity_ego", "nearest_frames", "nearest_label_frame", "sar_db_at", "to_frame",
 ]

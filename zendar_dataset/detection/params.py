@@ -17,7 +17,7 @@ CLUSTER_EPS_M = 1.5  # about half a car length: one car's scatterers chain into 
 # over the clusters of the demo training split (the dataset and command of
 # zendar_dataset.detection.static_scene.DEFAULT_THRESHOLD_DB) with a label within 4 m. About half a car's
 # length: most cars are seen from behind or ahead, in the ego's own street.
-DEFAULT_CENTRE_OFFSET_M = 2.02
+DEFAULT_CENTRE_OFFSET_M = 2.09
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from zendar_dataset.detection.cells import RadarCells
+from zendar_dataset.detection.cells import RadarCells, cfar_map, cube_power
 from zendar_dataset.detection.locate import locate_cells
 from zendar_dataset.detection.params import ChainParams
 from zendar_dataset.detection.static_scene import SarTestParams, is_dynamic, sar_db_at
@@ -37,7 +37,8 @@ class CubePoints:
         float64 radial velocity over the ground (measured minus a static point's, m/s,
         :func:`zendar_dataset.detection.locate.locate_cells`).
     sar_db : numpy.ndarray
-        float64 SAR value (:func:`zendar_dataset.detection.static_scene.sar_db_at`), NaN where no image covers.
+        float64 SAR value, dB (:func:`zendar_dataset.detection.static_scene.sar_db_at`: the SAR reading
+        minus the cell's range-Doppler SNR), NaN where no image covers.
     dynamic : numpy.ndarray
         bool, the SAR test's verdict.
     """
@@ -70,7 +71,8 @@ class FramePoints:
     score : numpy.ndarray
         float64 cell scores.
     sar_db : numpy.ndarray
-        float64 SAR values (NaN where no image covers the point).
+        float64 SAR values, dB (:func:`zendar_dataset.detection.static_scene.sar_db_at`; NaN where
+        no image covers the point).
     dynamic : numpy.ndarray
         bool, the SAR test's verdict.
     """
@@ -96,6 +98,36 @@ class FramePoints:
     def retested(self, sar: SarTestParams) -> FramePoints:
         """The same points with the SAR test's verdict under other settings."""
         return FramePoints(self.points_xy, self.radar_xy, self.score, self.sar_db, is_dynamic(self.sar_db, sar))
+
+
+def cell_snr_db(cube: np.ndarray, cells: RadarCells, params: ChainParams | None = None) -> np.ndarray:
+    """Each cell's range-Doppler SNR: its power over the CA-CFAR noise estimate around it, dB.
+
+    The same power and noise estimate as :func:`zendar_dataset.detection.cells.cfar_cells`, so for
+    CFAR cells it is ``10·log10(score)``; a CNN's cells (score = probability) get theirs from the
+    cube too. It is the range-Doppler half of the SAR test's value
+    (:func:`zendar_dataset.detection.static_scene.sar_db_at`).
+
+    Parameters
+    ----------
+    cube : numpy.ndarray
+        ``[R, D, A]`` complex cube.
+    cells : RadarCells
+        The cells.
+    params : ChainParams, optional
+        ``cfar_pfa`` (the noise estimate does not depend on it; the CFAR runs with the chain's).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``[N]`` float64 dB; -inf for a cell of zero power, +inf where the noise estimate is zero.
+    """
+    if len(cells) == 0:
+        return np.zeros(0)
+    power = cube_power(cube)
+    noise = cfar_map(power, params)[1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return 10.0 * np.log10(power[cells.range_bin, cells.doppler_bin] / noise[cells.range_bin, cells.doppler_bin])
 
 
 def cube_points(
@@ -124,7 +156,8 @@ def cube_points(
     params = ChainParams() if params is None else params
     points_ego, residual_mps = locate_cells(cube, cells.range_bin, cells.doppler_bin, timestamp_ns, calibration, poses)
     ecef_T_ego = poses.ecef_T_ego(int(timestamp_ns))
-    sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, max_frame_gap_ns=params.sar.max_frame_gap_ns)
+    sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, rd_snr_db=cell_snr_db(cube, cells, params),
+                       max_frame_gap_ns=params.sar.max_frame_gap_ns)
     return CubePoints(
         int(timestamp_ns), ecef_T_ego, np.asarray(ego_T_sensor(calibration).translation, np.float64), cells.range_bin, cells.doppler_bin,
         points_ego, cells.score, residual_mps, sar_db, is_dynamic(sar_db, params.sar),

@@ -1,0 +1,42 @@
+"""The SAR-test candidates' measurement reads the chain's points: its "reading minus SNR" column, computed
+from the image and the cube on its own, is the chain's SAR value point for point."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from zendar_baselines.classical.chain_fit import labelled_frames
+from zendar_baselines.classical.sar_test_candidates import (
+    CANDIDATES,
+    auc_table,
+    candidate_values,
+    main,
+)
+
+from zendar_dataset.sim.generate import synthesize_dataset
+from zendar_dataset.sim.profiles import get_profile
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("candidates") / "tiny"
+    synthesize_dataset(root, get_profile("tiny").with_duration(1.0), n_scenes=1, seed=5, split_ratios=(1, 0, 0), progress=False)
+    return root
+
+
+def test_the_chosen_candidate_is_the_chains_value_on_the_chains_points(tiny_root):
+    values = candidate_values(tiny_root, "train")
+    frames = labelled_frames(tiny_root, "train", progress=False)
+    np.testing.assert_array_equal(values["on_car"], frames.on_car)
+    np.testing.assert_allclose(values["range_m"], frames.range_m)
+    np.testing.assert_allclose(values["minus_snr"], frames.sar_db, atol=1e-4)  # float32 images
+    assert np.isfinite(frames.sar_db).sum() > 50
+    # Every candidate has a value wherever the reading has one (the backgrounds exist where the peak does).
+    for name in CANDIDATES:
+        assert np.isfinite(values[name]).sum() == np.isfinite(values["reading"]).sum(), name
+    assert set(auc_table(values)) == set(CANDIDATES)
+
+
+def test_a_split_without_scenes_exits_2(tiny_root, capsys):
+    assert main([str(tiny_root), "--splits", "val"]) == 2
+    assert "has no labelled scene" in capsys.readouterr().err
