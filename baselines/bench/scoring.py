@@ -33,9 +33,13 @@ from zendar_baselines.fingerprints import dataset_index, dataset_location
 BOOTSTRAP_RESAMPLES = 200
 #: Local peaks of a CNN's probability map at or above this are the chain's points (a floor, not a
 #: decision: the cluster scores order the detections, so the precision-recall curve reaches the
-#: recall of every peak kept). Measured in docs/baselines.md ("CNN peaks"): below it the recall on the
-#: demo split gains nothing while the points to place and test grow several-fold.
-PEAK_FLOOR = 0.05
+#: recall of every peak kept). Measured on the tiny config's validation split, six models (docs/baselines.md,
+#: "CNN peaks"): 0.01 reaches at most 0.02 more recall but places 2-5 times the points (23-57 per
+#: cube against 6-16); 0.05 and above lose recall (0.5: 0.18-0.28 against 0.36-0.38 at 0.02).
+PEAK_FLOOR = 0.02
+#: The CNN rows' chain before its fit: a cluster scores its best peak's probability times its
+#: dynamic share (a sum of probabilities would rank big diffuse clusters first).
+CNN_CHAIN = ChainParams(cluster_score="max")
 #: Inference batch (frames); memory only, results do not depend on it.
 PREDICT_BATCH = 8
 
@@ -198,7 +202,7 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     (:class:`ScoringScenes`); by default they are opened for this call only.
     """
     model, architecture = load_model(checkpoint, device)
-    params = ChainParams() if params is None else params
+    params = CNN_CHAIN if params is None else params
     window = config.window
     if scenes is not None and scenes.root.resolve() != Path(dataset_location(root)).resolve():
         raise ValueError(f"cnn_predictions: scenes of {scenes.root} given to score {root}")
