@@ -21,11 +21,13 @@ from zendar_dataset.detection import ChainParams
 from zendar_dataset.errors import ZendarError
 
 from zendar_baselines.bench.context import RunContext
-from zendar_baselines.bench.run_directory import read_json
+from zendar_baselines.bench.run_directory import RunDirectory, read_json
 from zendar_baselines.classical.chain_fit import CellsFor, cfar_cells_for, fit_chain
 from zendar_baselines.labels.splits import SemiSupervisedSplit
 
 CHAIN_FIT_FILE = "chain_fit.json"
+#: The CFAR row's fit, under the run directory.
+CFAR_STEP = "chain_fit/cfar"
 FORMAT_NAME = "zendar-chain-fit"
 FORMAT_VERSION = 1
 #: The fitted fields of :class:`ChainParams` recorded in ``chain_fit.json``; the rest are the defaults.
@@ -64,10 +66,20 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
     return params, summary
 
 
-def write_cfar_chain_fit(run: RunContext, split: SemiSupervisedSplit, step_dir: Path) -> None:
-    """The CFAR row's fit, on CA-CFAR peaks (the ``chain_fit/cfar`` step)."""
+def cfar_chain_step(directory: RunDirectory, run: RunContext, split: SemiSupervisedSplit,
+                    split_key: str) -> tuple[ChainParams, dict[str, Any], str]:
+    """The ``chain_fit/cfar`` step: the CFAR row's fit on CA-CFAR peaks, reused while the run's
+    inputs and the split (``split_key``, the split step's key) are unchanged.
+
+    Returns
+    -------
+    params, summary, key
+        The fitted constants, the fit's summary, and the step's key (for the CFAR row's inputs).
+    """
     base = ChainParams()
-    write_chain_fit(run, split, "CFAR", cfar_cells_for(base), base, step_dir)
+    step_dir, key, _ = directory.step(CFAR_STEP, {**run.step_inputs(), "split": split_key},
+                                      lambda d: write_chain_fit(run, split, "CFAR", cfar_cells_for(base), base, d))
+    return (*read_chain_fit(step_dir), key)
 
 
 def write_cnn_chain_fit(run: RunContext, split: SemiSupervisedSplit, checkpoint: Path, detector: str,

@@ -136,9 +136,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                                        lambda d: steps.write_label_masks(context, split, d))
     labels = TrainingLabels(split, auto_dir, masks_dir)
 
-    chain_dir, chain_key, _ = run.step("chain_fit/cfar", {**base_inputs, "split": split_key},
-                                       lambda d: chain_step.write_cfar_chain_fit(context, split, d))
-    cfar_chain, cfar_fit = chain_step.read_chain_fit(chain_dir)
+    cfar_chain, cfar_fit, chain_key = chain_step.cfar_chain_step(run, context, split, split_key)
 
     rows: list[Row] = []
     cfar_dir, _, _ = run.step("rows/cfar", {**base_inputs, "chain_fit": chain_key},

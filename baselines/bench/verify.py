@@ -78,7 +78,7 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
 def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: str,
                 test_scenes: ScoringScenes, lines: list[str]) -> bool:
     """Re-score every seed of one row, appending a line each; True when all reproduce."""
-    from zendar_baselines.bench.chain_step import read_chain_fit
+    from zendar_baselines.bench.chain_step import CFAR_STEP, read_chain_fit
     from zendar_baselines.bench.scoring import cfar_predictions, cnn_predictions
     from zendar_baselines.bench.steps import final_checkpoint
 
@@ -90,7 +90,7 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
     for seed_dir in seed_dirs:
         recorded = read_metrics(seed_dir / "metrics.json").ap
         if key == "cfar":
-            params, _ = read_chain_fit(out / "chain_fit" / "cfar")
+            params, _ = read_chain_fit(out / CFAR_STEP)
             predictions = cfar_predictions(test_scenes.index, params)
         else:
             params, _ = read_chain_fit(seed_dir)

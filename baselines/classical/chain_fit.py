@@ -268,11 +268,39 @@ def fit_chain(
         frames, check = frames.held_out()
         print(f"warning: {index.root}: no labelled validation scene; the {detector} chain fit is checked on the last "
               f"{HELD_OUT_SHARE:.0%} of each fitting scene's frames, held out of the fit", file=sys.stderr, flush=True)
+    params, fit = fit_on_frames(frames, base, detector, str(index.root))
+    summary: dict[str, Any] = {
+        "detector": detector, "threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
+        "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score, "fit": fit,
+        "check": {"source": source, **_counts(check), "auc": point_separation(check)["auc"],
+                  "ap": chain_ap(check, params) if check.points else None},
+    }
+    return params, summary
+
+
+def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CFAR", where: str = "") -> tuple[ChainParams, dict[str, Any]]:
+    """The constants fitted on ``frames`` (module docstring, steps 1 to 3) and the fit's figures.
+
+    Returns
+    -------
+    params : ChainParams
+        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
+    fit : dict
+        Counts, ``point_separation`` (ROC AUC, Youden threshold and J), ``radius_grid`` (each
+        radius with its offset and AP) and the chain's ``ap`` on ``frames`` with ``params``.
+
+    Raises
+    ------
+    ZendarError
+        When no SAR threshold separates the points on labelled cars from the others better than
+        chance (or every point, or none, is on a car); ``where`` and ``detector`` name the data.
+    """
+    counts = _counts(frames)
     separation = point_separation(frames)
     if separation["youden_j"] is None or separation["youden_j"] <= 0.0:
         raise ZendarError(
-            f"{index.root}: no SAR threshold separates the {detector} points on labelled cars from the others "
-            f"(scenes {list(frames.scene_frames)}: {_counts(frames)['on_car_points']} of {_counts(frames)['points']} points on cars, "
+            f"{where}: no SAR threshold separates the {detector} points on labelled cars from the others "
+            f"(scenes {counts['scenes']}: {counts['on_car_points']} of {counts['points']} points on cars, "
             f"ROC AUC {separation['auc']}); the SAR static-scene test cannot be fitted on these labels"
         )
     sar = replace(base.sar, threshold_db=round(2.0 * separation["youden_threshold_db"]) / 2.0)
@@ -280,17 +308,10 @@ def fit_chain(
     for eps_m in CLUSTER_EPS_GRID_M:
         trial = _offset_for(frames, replace(base, sar=sar, cluster_eps_m=eps_m))
         grid.append((trial, chain_ap(frames, trial)))
-    params, fit_ap = max(grid, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])  # first (smaller) on a tie
-    summary: dict[str, Any] = {
-        "detector": detector, "threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
-        "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score,
-        "fit": {**_counts(frames), "point_separation": separation, "ap": fit_ap,
-                "radius_grid": [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": ap["all"]}
-                                for t, ap in grid]},
-        "check": {"source": source, **_counts(check), "auc": point_separation(check)["auc"],
-                  "ap": chain_ap(check, params) if check.points else None},
-    }
-    return params, summary
+    params, ap = max(grid, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])  # first (smaller) on a tie
+    return params, {**counts, "point_separation": separation, "ap": ap,
+                    "radius_grid": [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": a["all"]}
+                                    for t, a in grid]}
 
 
 def fit_chain_params(
