@@ -7,7 +7,6 @@ scenes, 1 validation, 1 test) for the cached ``chain_fit`` step, its guard and i
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
