@@ -89,8 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     fit_chain = commands.add_parser(
         "fit-chain",
-        help="fit the detection chain's SAR threshold and centre offset on a split",
-        description="Fit the detection chain's SAR threshold and centre offset on a split.",
+        help="fit the detection chain's SAR threshold, cluster radius and centre offset on a split",
+        description="Fit the detection chain's SAR threshold, cluster radius and centre offset on a split's CFAR points, "
+        "checked on the validation split (never the test split).",
     )
     fit_chain.add_argument("root", help="dataset root")
     fit_chain.add_argument("--split", default="train", help="split to fit on (default: train; test is refused)")

@@ -7,9 +7,12 @@ The steps, each cached in the run directory under a key of its inputs (:mod:`run
 3. automatic labels of every training scene (a side store beside, never inside, the dataset) and
    their precision and recall against the manual labels, per band;
 4. the manual-label masks of the labelled part only;
-5. the CFAR baseline on the test split;
+5. the detection chain's constants fitted on CFAR peaks of the labelled part, checked on the
+   validation split (``chain_fit/cfar``, :mod:`chain_step`), and the CFAR baseline with them on the
+   test split;
 6. per architecture and seed: supervised-only training, pretraining on automatic labels then
-   fine-tuning; each scored on the test split;
+   fine-tuning; the chain's constants fitted on the model's own peaks as for CFAR; each scored on
+   the test split;
 7. ``results.json``, ``table.md``, ``table.csv``, precision-recall plots and a bird's-eye figure.
 """
 
@@ -110,7 +113,7 @@ def synthesis_jobs(n_scenes: int) -> int:
 
 def run_bench(options: BenchOptions) -> dict[str, Any]:
     """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content."""
-    from zendar_baselines.bench import scoring, steps
+    from zendar_baselines.bench import chain_step, scoring, steps
 
     started = time.monotonic()
     config = options.config
@@ -133,9 +136,11 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                                        lambda d: steps.write_label_masks(context, split, d))
     labels = TrainingLabels(split, auto_dir, masks_dir)
 
+    cfar_chain, cfar_fit, chain_key = chain_step.cfar_chain_step(run, context, split, split_key)
+
     rows: list[Row] = []
-    cfar_dir, _, _ = run.step("rows/cfar", base_inputs,
-                              lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset), root))
+    cfar_dir, _, _ = run.step("rows/cfar", {**base_inputs, "chain_fit": chain_key},
+                              lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset, cfar_chain, cfar_fit), root))
     rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_metrics(cfar_dir / "metrics.json")]))
 
     with scoring.ScoringScenes(dataset) as test_scenes:
@@ -160,10 +165,11 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
 def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,
                      test_scenes: ScoringScenes) -> None:
-    from zendar_baselines.bench import scoring, steps
+    from zendar_baselines.bench import chain_step, scoring, steps
 
     checkpoint = steps.train_row(context, labels, row, out_dir)
-    predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, scenes=test_scenes)
+    params, fit = chain_step.write_cnn_chain_fit(context, labels.split, checkpoint, row.row_key, out_dir)
+    predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, params, test_scenes, fit)
     scoring.score_into(out_dir, predictions, context.root)
 
 

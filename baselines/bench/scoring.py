@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.detection import (
-    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, mask_cells, to_frame,
+    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, probability_peaks, to_frame,
 )
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import write_metrics
@@ -31,15 +31,27 @@ from zendar_baselines.fingerprints import dataset_index, dataset_location
 
 #: Bootstrap resamples (over test scenes) for each row's 95 % interval.
 BOOTSTRAP_RESAMPLES = 200
-#: Mask cells at or above this probability are the CNN's detections (the sigmoid's midpoint).
-MASK_THRESHOLD = 0.5
+#: Local peaks of a CNN's probability map at or above this are the chain's points (a floor, not a
+#: decision: the cluster scores order the detections, so the precision-recall curve reaches the
+#: recall of every peak kept). Measured on the tiny config's validation split, six models (docs/baselines.md,
+#: "CNN peaks"): 0.01 reaches at most 0.02 more recall but places 2-5 times the points (23-57 per
+#: cube against 6-16); 0.05 and above lose recall (0.5: 0.18-0.28 against 0.36-0.38 at 0.02).
+PEAK_FLOOR = 0.02
+#: The CNN rows' chain before its fit: a cluster scores its best peak's probability times its
+#: dynamic share (a sum of probabilities would rank big diffuse clusters first).
+CNN_CHAIN = ChainParams(cluster_score="max")
 #: Inference batch (frames); memory only, results do not depend on it.
 PREDICT_BATCH = 8
 
 
-def cfar_predictions(dataset: DatasetIndex | str | os.PathLike) -> dict[str, Any]:
-    """Table 1 row 1 on the test split (``dataset``: its root, or the dataset already opened)."""
-    return cfar_baseline.cfar_predictions(dataset_index(dataset), "test")
+def cfar_predictions(dataset: DatasetIndex | str | os.PathLike, params: ChainParams | None = None,
+                     chain_fit: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Table 1 row 1 on the test split (``dataset``: its root, or the dataset already opened), with the
+    chain's constants ``params`` and the summary of their fit recorded in the meta."""
+    predictions = cfar_baseline.cfar_predictions(dataset_index(dataset), "test", params)
+    if chain_fit is not None:
+        predictions["meta"]["chain_fit"] = chain_fit
+    return predictions
 
 
 def score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
@@ -131,15 +143,11 @@ class ScoringScenes:
         return scene.maps[radar]
 
 
-def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig, checkpoint: Path, device: str,
-                    params: ChainParams | None = None, scenes: ScoringScenes | None = None) -> dict[str, Any]:
-    """A trained model's detections on every test frame, through the CFAR baseline's chain.
+CellsOf = Callable[[str, int, np.ndarray], RadarCells]
 
-    Per radar cube with a full window of K maps, the cells the model calls moving (probability ≥
-    :data:`MASK_THRESHOLD`, score = probability) are placed by DOA, put to the SAR test and
-    clustered with the other radar's points of the frame. ``scenes``: the test scenes shared with
-    other scorings (:class:`ScoringScenes`); by default they are opened for this call only.
-    """
+
+def load_model(checkpoint: Path, device: str) -> tuple[Any, dict[str, Any]]:
+    """A trained model (checked against its manifest) on ``device``, and its architecture record."""
     from zendar_baselines.cnn.checkpoints import load_checkpoint, load_model_state
     from zendar_baselines.cnn.models import build_model
 
@@ -147,8 +155,54 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     architecture = stored["architecture"]
     model = build_model(architecture["name"], architecture["in_channels"], architecture["width_scale"])
     load_model_state(model, stored, checkpoint)
-    model.to(device)
-    params = ChainParams() if params is None else params
+    return model.to(device), architecture
+
+
+def cube_probabilities(model, maps: np.ndarray, window: int, device: str) -> np.ndarray:
+    """``[N, R, D]`` float32 probability of a moving object for each of a radar's ``N`` cubes.
+
+    ``maps``: the radar's log-power maps ``[N, A, R, D]``. Cube ``k``'s input is the window ending
+    at map ``k``, the first map repeated before the scene's start
+    (:func:`zendar_baselines.cnn.maps.stack_window`), so every cube gets a prediction.
+    """
+    from zendar_baselines.cnn.maps import stack_window
+    from zendar_baselines.cnn.training import predict_masks
+
+    return predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
+
+
+def peak_cells_of(probability: dict[str, np.ndarray], floor: float = PEAK_FLOOR) -> CellsOf:
+    """The chain's cells of a scene's cubes: the peaks of each cube's probability map
+    (``probability``: radar -> ``[N, R, D]``, :func:`cube_probabilities`), score = probability."""
+    return lambda radar, k, cube: probability_peaks(probability[radar][k], floor)
+
+
+def model_cells_for(model, window: int, device: str) -> Callable[[SceneReader], CellsOf]:
+    """For any open scene, the cells of its cubes by ``model``'s peaks (the CNN rows' fit of the chain,
+    :mod:`zendar_baselines.classical.chain_fit`)."""
+    from zendar_baselines.cnn.maps import log_power_maps
+
+    def cells_for(reader: SceneReader) -> CellsOf:
+        return peak_cells_of({radar: cube_probabilities(model, log_power_maps(reader.array(f"radar/{radar}/cube")), window, device)
+                              for radar in reader.sensors("radar")})
+
+    return cells_for
+
+
+def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig, checkpoint: Path, device: str,
+                    params: ChainParams | None = None, scenes: ScoringScenes | None = None,
+                    chain_fit: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A trained model's detections on every test frame, through the CFAR baseline's chain.
+
+    Per radar cube (the first cubes of a scene with their window padded by the first map), the
+    peaks of the model's probability map at or above :data:`PEAK_FLOOR` (score = probability) are
+    placed by DOA, put to the SAR test with ``params`` (the constants fitted on this model's own
+    peaks, whose fit ``chain_fit`` summarises in the meta) and clustered with the other radar's
+    points of the frame. ``scenes``: the test scenes shared with other scorings
+    (:class:`ScoringScenes`); by default they are opened for this call only.
+    """
+    model, architecture = load_model(checkpoint, device)
+    params = CNN_CHAIN if params is None else params
     window = config.window
     if scenes is not None and scenes.root.resolve() != Path(dataset_location(root)).resolve():
         raise ValueError(f"cnn_predictions: scenes of {scenes.root} given to score {root}")
@@ -156,33 +210,24 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
         if scenes is None:
             scenes = stack.enter_context(ScoringScenes(root, keep=False))
         results = _predict_test_split(model, scenes, window, params, device, architecture["name"])
-    meta = {"method": f"{architecture['name']} mask + SAR test + DBSCAN", "checkpoint": checkpoint.name,
-            "architecture": architecture, "parameters": params.to_json()}
+    meta = {"method": f"{architecture['name']} probability peaks + SAR test + DBSCAN", "checkpoint": checkpoint.name,
+            "architecture": architecture, "parameters": params.to_json(), "peak_floor": PEAK_FLOOR}
+    if chain_fit is not None:
+        meta["chain_fit"] = chain_fit
     return {"meta": meta, "results": results}
 
 
 def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
                         name: str) -> dict[str, list[dict[str, float]]]:
-    """Per test frame id, the detections of ``model``'s masks through the chain (see :func:`cnn_predictions`)."""
-    from zendar_baselines.cnn.maps import stack_window
-    from zendar_baselines.cnn.training import predict_masks
-
+    """Per test frame id, the detections of ``model``'s peaks through the chain (see :func:`cnn_predictions`)."""
     results: dict[str, list[dict[str, float]]] = {}
     with tqdm(desc=f"{name} test", unit="frame") as bar:
         for scene_id in scenes.scene_ids():
             with scenes.opened(scene_id) as scene:
-                probability = {}
-                for radar in scene.reader.sensors("radar"):
-                    maps = scenes.maps(scene, radar)
-                    probability[radar] = predict_masks(model, stack_window(maps, window), PREDICT_BATCH, device)
-
-                def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
-                    if k < window - 1:  # no full window yet: the model has no input for this cube
-                        return mask_cells(np.zeros(cube.shape[:2]))
-                    return mask_cells(probability[radar][k - window + 1], MASK_THRESHOLD)
-
-                for frame_ns, found in frame_cube_points(scene.reader, cells_of, params, poses=scene.poses,
-                                                         sar=scene.sar):
+                probability = {radar: cube_probabilities(model, scenes.maps(scene, radar), window, device)
+                               for radar in scene.reader.sensors("radar")}
+                for frame_ns, found in frame_cube_points(scene.reader, peak_cells_of(probability), params,
+                                                         poses=scene.poses, sar=scene.sar):
                     points = FramePoints.concatenate([to_frame(cube, scene.poses, frame_ns) for cube in found])
                     results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
                     bar.update(1)

@@ -1,7 +1,8 @@
 """``zendar-bench verify``: re-score a finished run from its checkpoints.
 
 Every CNN row's checkpoints are loaded (their SHA-256 manifest and architecture checked), the test
-split is predicted again and scored by the official evaluator; the CFAR row is recomputed from the
+split is predicted again, with the chain's constants the run fitted for the row (its
+``chain_fit.json``), and scored by the official evaluator; the CFAR row is recomputed from the
 cubes. A row reproduces when every band's AP is within :data:`AP_TOLERANCE` of what the run recorded.
 Inference is deterministic on one machine; the tolerance allows for another CPU's or a GPU's float
 rounding moving a few cells across the mask threshold.
@@ -77,6 +78,7 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
 def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: str,
                 test_scenes: ScoringScenes, lines: list[str]) -> bool:
     """Re-score every seed of one row, appending a line each; True when all reproduce."""
+    from zendar_baselines.bench.chain_step import CFAR_STEP, read_chain_fit
     from zendar_baselines.bench.scoring import cfar_predictions, cnn_predictions
     from zendar_baselines.bench.steps import final_checkpoint
 
@@ -88,9 +90,11 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
     for seed_dir in seed_dirs:
         recorded = read_metrics(seed_dir / "metrics.json").ap
         if key == "cfar":
-            predictions = cfar_predictions(test_scenes.index)
+            params, _ = read_chain_fit(out / CFAR_STEP)
+            predictions = cfar_predictions(test_scenes.index, params)
         else:
-            predictions = cnn_predictions(test_scenes.index, config, final_checkpoint(seed_dir), device, scenes=test_scenes)
+            params, _ = read_chain_fit(seed_dir)
+            predictions = cnn_predictions(test_scenes.index, config, final_checkpoint(seed_dir), device, params, test_scenes)
         again = evaluate_record(predictions, str(root), split="test").ap
         worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
                     default=0.0)

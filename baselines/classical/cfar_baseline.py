@@ -32,8 +32,9 @@ def cfar_predictions(
     split : str
         Split to predict (every SAR frame of its scenes, labelled or not).
     params : ChainParams, optional
-        The chain's settings (default: the ones fitted on the training split, see
-        :mod:`zendar_baselines.classical.chain_fit`).
+        The chain's settings (default: the package's, measured once on the demo training split;
+        ``zendar-bench`` passes those it fitted on the run's labelled training scenes, see
+        :mod:`zendar_baselines.bench.chain_step`).
     progress : bool
         Show a progress bar over the frames.
     storage_options : dict, optional

@@ -1,28 +1,46 @@
-"""The detection chain's two measured numbers, fitted on a split's labels (the training split; never test).
+"""The detection chain's measured constants, fitted on labels a run may use (never the test split).
 
     zendar-bench fit-chain ROOT [--split train] [--sweep]
     python -m zendar_baselines.classical.chain_fit ROOT [--split train] [--sweep]   (the same)
 
+``zendar-bench`` fits them in a cached step of every run, per detector: the CFAR row on CFAR peaks,
+each CNN row's seed on that model's own probability peaks (different points: a CNN's peaks are not
+CFAR's), on the labelled part of the training split only (:mod:`zendar_baselines.bench.chain_step`).
+The constants, fitted on the points of the fitting scenes' labelled frames:
+
 1. The SAR test's threshold (:attr:`zendar_dataset.detection.SarTestParams.threshold_db`): the
-   test classifies points, so its threshold is the one that best finds the CFAR points inside
-   labelled boxes among the others by the SAR value: the largest F1 score (harmonic mean of the
-   precision and recall of the points it calls dynamic), rounded to 0.5 dB. The automatic labels are
-   judged by exactly that precision and recall. Youden's J (true-positive minus false-positive
-   rate), the criterion before, is reported too: it ignores that other points outnumber on-car ones
-   about ten to one and so accepts many false moving points (docs/baselines.md). A threshold tuned
-   for the detector's AP instead would be a different method (``--sweep`` reports the chain's AP
-   over a grid of thresholds, for reference).
-2. The centre offset (:attr:`zendar_dataset.detection.ChainParams.centre_offset_m`): the
-   radar sees a car's near face, so a cluster's centre falls short of the labelled centre along the
-   line of sight. The offset is the median, over clusters whose uncorrected centre lies within
+   test classifies points, so its threshold is the one that best finds the points inside labelled
+   boxes among the others by the SAR value: the largest F1 score (harmonic mean of the precision
+   and recall of the points it calls dynamic), rounded to 0.5 dB. The automatic labels are judged
+   by exactly that precision and recall. Youden's J (true-positive minus false-positive rate) is
+   reported too: it ignores that other points outnumber on-car ones about ten to one and so
+   accepts many false moving points (docs/baselines.md). A threshold tuned for the detector's AP
+   instead would be a different method (``--sweep`` reports the chain's AP over a grid of
+   thresholds, for reference). When no threshold does better than chance (Youden's J <= 0:
+   on-car points no darker than the others), the fit stops with a ZendarError.
+2. The cluster radius (:attr:`zendar_dataset.detection.ChainParams.cluster_eps_m`): the radius of
+   :data:`CLUSTER_EPS_GRID_M` whose chain AP (all bands) on the fitting frames is highest, the
+   smaller on a tie. No point-level statistic says how far apart one car's points may lie and two
+   cars' must, so the radius is chosen by the detections it gives; the grid is short and coarse
+   (about half a car length, give or take a metre), so that a few cars cannot tune it finely.
+3. The centre offset (:attr:`zendar_dataset.detection.ChainParams.centre_offset_m`), for each radius:
+   the radar sees a car's near face, so a cluster's centre falls short of the labelled centre along
+   the line of sight. The offset is the median, over clusters whose uncorrected centre lies within
    :data:`OFFSET_MATCH_RADIUS_M` of a label, of the label centre's distance beyond the cluster
    centre along the line of sight from the radars.
+
+The fit is checked on other labelled frames: the validation split's, or, for a dataset without
+labelled validation scenes, the last :data:`HELD_OUT_SHARE` of each fitting scene's labelled frames,
+held out of the fit (a warning says so, and the summary's ``check.source``). The check reports the
+SAR value's ROC AUC on its points and the chain's AP with the fitted constants.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -35,6 +53,7 @@ from zendar_dataset.detection import (
     ChainParams,
     FramePoints,
     LabelBoxes,
+    RadarCells,
     cfar_cells,
     frame_clusters,
     frame_cube_points,
@@ -45,7 +64,7 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate_record
 from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
 from zendar_dataset.format import frame_id
-from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
 
 # A cluster counts towards the offset when a label lies this close to its uncorrected centre: a car
 # length, so that clusters short by half a car's depth (and the lag of a cube up to 0.1 s older than
@@ -53,69 +72,110 @@ from zendar_dataset.format.reader import open_dataset
 OFFSET_MATCH_RADIUS_M = 4.0
 # The SAR values of CFAR points on the demo's training split span about -25 to 65 dB (1st to 99th percentile).
 THRESHOLD_GRID_DB = np.arange(-40.0, 70.0 + 0.5, 1.0)
+#: DBSCAN radii tried (metres), around :data:`zendar_dataset.detection.CLUSTER_EPS_M`.
+CLUSTER_EPS_GRID_M = (1.0, 1.5, 2.0, 2.5, 3.0)
+#: Without labelled validation scenes, this share of each fitting scene's labelled frames (its last
+#: ones: a time segment, so that the check's frames are not the fit's neighbours) checks the fit.
+HELD_OUT_SHARE = 0.25
+#: The split whose scenes the chain is never fitted on, nor checked on.
+GUARDED_SPLIT = "test"
+
+CellsOf = Callable[[str, int, np.ndarray], RadarCells]
+#: For an open scene, the cells of each of its cubes: ``cells_for(reader)(radar, cube_index, cube)``.
+CellsFor = Callable[[SceneReader], CellsOf]
+
+
+def cfar_cells_for(params: ChainParams) -> CellsFor:
+    """The CFAR baseline's cells (CA-CFAR peaks) for any scene."""
+    return lambda reader: (lambda radar, k, cube: cfar_cells(cube, params))
 
 
 @dataclass
 class LabelledFrames:
-    """A split's frames with the chain's points and the labels.
+    """Labelled frames with the chain's points and the labels, keyed by frame id.
 
     Attributes
     ----------
     points : dict of str to FramePoints
-        Frame id -> every radar's CFAR points in the frame's ego frame.
+        Every radar's points in the frame's ego frame (their SAR values in ``sar_db``).
     labels : dict of str to numpy.ndarray
-        Frame id -> ``[B, 2]`` labelled centres, metres, same frame.
-    sar_db : numpy.ndarray
-        ``[P]`` SAR value of every CFAR point (NaN outside every image).
-    on_car : numpy.ndarray
-        ``[P]`` bool: the point lies inside a labelled box (moved to the cube's time) grown by
-        :data:`zendar_dataset.detection.boxes.ON_CAR_MARGIN_M`.
-    range_m : numpy.ndarray
-        ``[P]`` float64 the point's distance from the ego origin in its frame's ego frame, metres
-        (the evaluator's range, which decides its band).
+        ``[B, 2]`` labelled centres, metres, same frame.
+    on_car : dict of str to numpy.ndarray
+        ``[P]`` bool per point of ``points``: it lies inside a labelled box (moved to its cube's
+        time) grown by :data:`zendar_dataset.detection.boxes.ON_CAR_MARGIN_M`.
+    range_m : dict of str to numpy.ndarray
+        ``[P]`` float64 per point of ``points``: its distance from the ego origin in the frame's ego
+        frame, metres (the evaluator's range, which decides its band).
+    scene_frames : dict of str to list of str
+        Scene id -> its frame ids, in time order.
     """
 
     points: dict[str, FramePoints]
     labels: dict[str, np.ndarray]
-    sar_db: np.ndarray
-    on_car: np.ndarray
-    range_m: np.ndarray
+    on_car: dict[str, np.ndarray]
+    range_m: dict[str, np.ndarray]
+    scene_frames: dict[str, list[str]]
+
+    @property
+    def sar_db(self) -> np.ndarray:
+        """``[P]`` float64 SAR value of every point of every frame (NaN outside every image)."""
+        return np.concatenate([np.zeros(0)] + [points.sar_db for points in self.points.values()])
+
+    @property
+    def point_on_car(self) -> np.ndarray:
+        """``[P]`` bool, aligned with :attr:`sar_db`."""
+        return np.concatenate([np.zeros(0, bool)] + [self.on_car[fid] for fid in self.points])
+
+    @property
+    def point_range_m(self) -> np.ndarray:
+        """``[P]`` float64, aligned with :attr:`sar_db`."""
+        return np.concatenate([np.zeros(0)] + [self.range_m[fid] for fid in self.points])
+
+    def subset(self, frame_ids: list[str]) -> LabelledFrames:
+        """The frames ``frame_ids`` only."""
+        keep = set(frame_ids)
+        return LabelledFrames(
+            {fid: p for fid, p in self.points.items() if fid in keep}, {fid: v for fid, v in self.labels.items() if fid in keep},
+            {fid: v for fid, v in self.on_car.items() if fid in keep},
+            {fid: v for fid, v in self.range_m.items() if fid in keep},
+            {scene: [fid for fid in fids if fid in keep] for scene, fids in self.scene_frames.items() if keep.intersection(fids)},
+        )
+
+    def held_out(self, share: float = HELD_OUT_SHARE) -> tuple[LabelledFrames, LabelledFrames]:
+        """``(fit, check)``: the last ``share`` of each scene's frames (at least one) held out, when
+        the scene has two frames or more."""
+        fit, check = [], []
+        for fids in self.scene_frames.values():
+            n_check = min(max(math.ceil(share * len(fids)), 1), len(fids) - 1)
+            fit += fids[: len(fids) - n_check]
+            check += fids[len(fids) - n_check :]
+        return self.subset(fit), self.subset(check)
 
 
-def labelled_frames(root: str | os.PathLike, split: str, params: ChainParams | None = None, progress: bool = True) -> LabelledFrames:
-    """Run the chain up to the SAR values on every labelled frame of ``split``.
-
-    Raises
-    ------
-    ZendarError
-        When the split has no labelled scene.
-    """
+def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsFor, params: ChainParams | None = None,
+                    progress: bool = True, description: str = "chain_fit") -> LabelledFrames:
+    """Run the chain up to the SAR values on every labelled frame of ``scene_ids`` (scenes without
+    labels are skipped), with the cells ``cells_for`` gives (:func:`cfar_cells_for`, or a CNN's peaks)."""
     params = ChainParams() if params is None else params
-    index = open_dataset(root)
-    points: dict[str, FramePoints] = {}
-    labels_xy: dict[str, np.ndarray] = {}
-    sar_db, on_car, range_m = [], [], []
-    scene_ids = index.scene_ids(split)
-    for scene_id in tqdm(scene_ids, desc=f"chain_fit {split}", unit="scene", disable=not progress):
+    frames = LabelledFrames({}, {}, {}, {}, {})
+    for scene_id in tqdm(scene_ids, desc=description, unit="scene", disable=not progress):
         with index.open_scene(scene_id) as reader:
             labels = reader.labels()
             if labels is None:
                 continue
             poses = reader.ego_poses()
-            for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
+            frames.scene_frames[scene_id] = []
+            for frame_ns, found in frame_cube_points(reader, cells_for(reader), params, poses=poses):
                 boxes = LabelBoxes.of_frame(labels, frame_ns)
-                in_frame = [to_frame(cube, poses, frame_ns) for cube in found]
-                for cube, moved in zip(found, in_frame):
-                    at_cube = boxes.moved_to(cube.timestamp_ns, poses)
-                    on_car.append(at_cube.contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1))
-                    sar_db.append(cube.sar_db)
-                    range_m.append(np.hypot(moved.points_xy[:, 0], moved.points_xy[:, 1]))
                 fid = frame_id(scene_id, frame_ns)
-                points[fid] = FramePoints.concatenate(in_frame)
-                labels_xy[fid] = np.stack([boxes.x, boxes.y], axis=1)
-    if not labels_xy:
-        raise ZendarError(f"{root}: split {split!r} has no labelled scene to fit the detection chain on")
-    return LabelledFrames(points, labels_xy, np.concatenate(sar_db), np.concatenate(on_car), np.concatenate(range_m))
+                frames.on_car[fid] = np.concatenate([np.zeros(0, bool)] + [
+                    boxes.moved_to(cube.timestamp_ns, poses).contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1)
+                    for cube in found])
+                frames.points[fid] = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
+                frames.range_m[fid] = np.hypot(frames.points[fid].points_xy[:, 0], frames.points[fid].points_xy[:, 1])
+                frames.labels[fid] = np.stack([boxes.x, boxes.y], axis=1)
+                frames.scene_frames[scene_id].append(fid)
+    return frames
 
 
 def centre_offset_m(frames: LabelledFrames, params: ChainParams) -> float | None:
@@ -168,49 +228,183 @@ def separation_auc(on_car: np.ndarray, sar_db: np.ndarray) -> float | None:
 
 
 def point_separation(frames: LabelledFrames) -> dict[str, Any]:
-    """How well the SAR value separates on-car from other CFAR points, overall and per range band.
+    """How well the SAR value separates the points on labelled cars from the others (:func:`separation_of`)."""
+    return separation_of(frames.point_on_car, frames.sar_db, frames.point_range_m)
+
+
+def separation_of(on_car: np.ndarray, sar_db: np.ndarray, range_m: np.ndarray) -> dict[str, Any]:
+    """How well the SAR value separates on-car from other points, overall and per range band.
+
+    Parameters
+    ----------
+    on_car : numpy.ndarray
+        ``[P]`` bool: the point lies on a labelled car.
+    sar_db : numpy.ndarray
+        ``[P]`` float64 SAR values, dB (NaN: no image).
+    range_m : numpy.ndarray
+        ``[P]`` float64 the evaluator's range of each point, metres.
 
     Returns
     -------
     dict
         ``auc``: ROC AUC over every point with a SAR value (low values say "on a car");
         ``f1_threshold_db``: the value whose "dynamic below it" has the largest F1 score on the
-        on-car points (the fitted threshold); ``youden_threshold_db``: the value that maximises the
-        true-positive minus false-positive rate; ``auc_per_band``: band name
-        (:data:`zendar_dataset.eval.protocol.RANGE_BANDS`) ->
-        the AUC of the points in that band of the evaluator's range (``frames.range_m``);
-        ``points_per_band``: band -> ``{"on_car", "other"}`` counts of points with a SAR value.
-        An AUC or threshold is None where a set lacks on-car or other points.
+        on-car points (the fitted threshold); ``youden_threshold_db`` and ``youden_j``: the value
+        that maximises the true-positive minus false-positive rate, and that rate;
+        ``auc_per_band``: band name (:data:`zendar_dataset.eval.protocol.RANGE_BANDS`) -> the AUC
+        of the points in that band; ``points_per_band``: band -> ``{"on_car", "other"}`` counts
+        of points with a SAR value. An AUC or threshold is None where a set lacks on-car or other
+        points.
     """
-    finite = np.isfinite(frames.sar_db)
+    on_car = np.asarray(on_car, bool)
+    sar_db = np.asarray(sar_db, np.float64)
+    range_m = np.asarray(range_m, np.float64)
+    finite = np.isfinite(sar_db)
     auc_per_band, points_per_band = {}, {}
     for band in RANGE_BANDS:
         low, high = BANDS_M[band]
-        in_band = (frames.range_m >= low) & (frames.range_m < high)
-        auc_per_band[band] = separation_auc(frames.on_car[in_band], frames.sar_db[in_band])
+        in_band = (range_m >= low) & (range_m < high)
+        auc_per_band[band] = separation_auc(on_car[in_band], sar_db[in_band])
         points_per_band[band] = {
-            "on_car": int(np.count_nonzero(in_band & finite & frames.on_car)),
-            "other": int(np.count_nonzero(in_band & finite & ~frames.on_car)),
+            "on_car": int(np.count_nonzero(in_band & finite & on_car)),
+            "other": int(np.count_nonzero(in_band & finite & ~on_car)),
         }
-    auc = separation_auc(frames.on_car, frames.sar_db)
-    youden = f1 = None
+    auc = separation_auc(on_car, sar_db)
+    youden = youden_j = f1 = None
     if auc is not None:
-        fpr, tpr, thresholds = roc_curve(frames.on_car[finite], -frames.sar_db[finite])
-        youden = float(-thresholds[int(np.argmax(tpr - fpr))])
-        precision, recall, cuts = precision_recall_curve(frames.on_car[finite], -frames.sar_db[finite])
+        truth, value = on_car[finite], sar_db[finite]
+        fpr, tpr, thresholds = roc_curve(truth, -value)
+        best = int(np.argmax(tpr - fpr))
+        youden, youden_j = float(-thresholds[best]), float(tpr[best] - fpr[best])
+        precision, recall, cuts = precision_recall_curve(truth, -value)
         score = 2.0 * precision[:-1] * recall[:-1] / np.maximum(precision[:-1] + recall[:-1], np.finfo(float).tiny)
         f1 = float(-cuts[int(np.argmax(score))])
     return {
-        "auc": auc, "f1_threshold_db": f1, "youden_threshold_db": youden, "auc_per_band": auc_per_band,
-        "points_per_band": points_per_band,
+        "auc": auc, "f1_threshold_db": f1, "youden_threshold_db": youden, "youden_j": youden_j,
+        "auc_per_band": auc_per_band, "points_per_band": points_per_band,
     }
+
+
+def _offset_for(frames: LabelledFrames, params: ChainParams) -> ChainParams:
+    offset = centre_offset_m(frames, replace(params, centre_offset_m=0.0))
+    return replace(params, centre_offset_m=0.0 if offset is None else round(offset, 2))
+
+
+def _counts(frames: LabelledFrames) -> dict[str, Any]:
+    sar_db = frames.sar_db
+    return {"scenes": list(frames.scene_frames), "frames": len(frames.points), "points": int(sar_db.size),
+            "on_car_points": int(frames.point_on_car.sum()), "outside_sar": int(np.count_nonzero(~np.isfinite(sar_db)))}
+
+
+def fit_chain(
+    index: DatasetIndex, fit_scene_ids: list[str], check_scene_ids: list[str], cells_for: CellsFor,
+    base: ChainParams | None = None, *, detector: str = "CFAR", progress: bool = True,
+) -> tuple[ChainParams, dict[str, Any]]:
+    """Fit the SAR threshold, cluster radius and centre offset on one detector's points (module docstring).
+
+    Parameters
+    ----------
+    index : DatasetIndex
+        The dataset.
+    fit_scene_ids : list of str
+        Scenes whose labels fit the constants.
+    check_scene_ids : list of str
+        Scenes whose labels check the fit (the validation split); when none of them is labelled,
+        the last :data:`HELD_OUT_SHARE` of each fitting scene's frames are held out to check it.
+    cells_for : callable
+        The detector's cells for a scene (:data:`CellsFor`).
+    base : ChainParams, optional
+        Everything else of the chain (``cluster_score``, ``cfar_pfa``, ...).
+    detector : str
+        Named in messages and the summary.
+    progress : bool
+        Show a progress bar over the scenes.
+
+    Returns
+    -------
+    params : ChainParams
+        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
+    summary : dict
+        ``detector``, the fitted values, ``fit`` (counts, the point separation, the radius grid's
+        AP, the chain's AP on the fitting frames) and ``check`` (``source``: ``"val"`` or
+        ``"held-out training frames"``, counts, the SAR value's ROC AUC and the chain's AP).
+
+    Raises
+    ------
+    ZendarError
+        For a scene of the test split, fitting scenes without labelled frames, or points that no SAR
+        threshold separates better than chance.
+    """
+    test_scenes = set(index.scene_ids(GUARDED_SPLIT))
+    guarded = sorted(test_scenes.intersection([*fit_scene_ids, *check_scene_ids]))
+    if guarded:
+        raise ZendarError(f"{index.root}: the detection chain is fitted on training labels, never on split "
+                          f"{GUARDED_SPLIT!r} (scenes {guarded})")
+    base = ChainParams() if base is None else base
+    frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})")
+    if not frames.points:
+        raise ZendarError(f"{index.root}: scenes {list(fit_scene_ids)} have no labelled frame to fit the detection chain on")
+    check = labelled_frames(index, list(check_scene_ids), cells_for, base, progress, f"chain check ({detector})")
+    source = "val"
+    if not check.points:
+        source = "held-out training frames"
+        frames, check = frames.held_out()
+        print(f"warning: {index.root}: no labelled validation scene; the {detector} chain fit is checked on the last "
+              f"{HELD_OUT_SHARE:.0%} of each fitting scene's frames, held out of the fit", file=sys.stderr, flush=True)
+    params, fit = fit_on_frames(frames, base, detector, str(index.root))
+    check_separation = point_separation(check)
+    summary: dict[str, Any] = {
+        "detector": detector, "threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
+        "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score, "fit": fit,
+        "check": {"source": source, **_counts(check), "auc": check_separation["auc"],
+                  "auc_per_band": check_separation["auc_per_band"],
+                  "ap": chain_ap(check, params) if check.points else None},
+    }
+    return params, summary
+
+
+def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CFAR", where: str = "") -> tuple[ChainParams, dict[str, Any]]:
+    """The constants fitted on ``frames`` (module docstring, steps 1 to 3) and the fit's figures.
+
+    Returns
+    -------
+    params : ChainParams
+        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
+    fit : dict
+        Counts, ``point_separation`` (:func:`separation_of`), ``radius_grid`` (each
+        radius with its offset and AP) and the chain's ``ap`` on ``frames`` with ``params``.
+
+    Raises
+    ------
+    ZendarError
+        When no SAR threshold separates the points on labelled cars from the others better than
+        chance (or every point, or none, is on a car); ``where`` and ``detector`` name the data.
+    """
+    counts = _counts(frames)
+    separation = point_separation(frames)
+    if separation["youden_j"] is None or separation["youden_j"] <= 0.0:
+        raise ZendarError(
+            f"{where}: no SAR threshold separates the {detector} points on labelled cars from the others "
+            f"(scenes {counts['scenes']}: {counts['on_car_points']} of {counts['points']} points on cars, "
+            f"ROC AUC {separation['auc']}); the SAR static-scene test cannot be fitted on these labels"
+        )
+    sar = replace(base.sar, threshold_db=round(2.0 * separation["f1_threshold_db"]) / 2.0)
+    grid = []
+    for eps_m in CLUSTER_EPS_GRID_M:
+        trial = _offset_for(frames, replace(base, sar=sar, cluster_eps_m=eps_m))
+        grid.append((trial, chain_ap(frames, trial)))
+    params, ap = max(grid, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])  # first (smaller) on a tie
+    return params, {**counts, "point_separation": separation, "ap": ap,
+                    "radius_grid": [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": a["all"]}
+                                    for t, a in grid]}
 
 
 def fit_chain_params(
     root: str | os.PathLike, split: str = "train", base: ChainParams | None = None, progress: bool = True,
     sweep: bool = False,
 ) -> tuple[ChainParams, dict[str, Any]]:
-    """Fit the SAR threshold and the centre offset on ``split`` (module docstring).
+    """Fit the CFAR chain's constants on every scene of ``split``, checked on the validation split
+    (``zendar-bench fit-chain``; :func:`fit_chain`).
 
     Parameters
     ----------
@@ -228,39 +422,36 @@ def fit_chain_params(
     Returns
     -------
     params : ChainParams
-        ``base`` with the fitted ``sar.threshold_db`` and ``centre_offset_m``.
+        ``base`` with the fitted constants.
     summary : dict
-        The fit's figures: counts, the point separation (ROC AUC overall and per band, F1 and
-        Youden thresholds, :func:`point_separation`), the chosen
-        values with the chain's AP on the split, and the sweep when asked.
+        :func:`fit_chain`'s, with ``root``, ``split`` and the fitting frames' counts at its top
+        (``frames``, ``cfar_points``, ``on_car_points``, ``outside_sar``, ``point_separation``,
+        ``ap``), and the sweep when asked.
 
     Raises
     ------
     ZendarError
         For the test split, a split without labels, or labels that leave no threshold to fit.
     """
-    if split == "test":
-        raise ZendarError(f"{root}: the detection chain is fitted on training labels, never on split 'test'")
+    if split == GUARDED_SPLIT:
+        raise ZendarError(f"{root}: the detection chain is fitted on training labels, never on split {GUARDED_SPLIT!r}")
     base = ChainParams() if base is None else base
-    frames = labelled_frames(root, split, base, progress)
-    separation = point_separation(frames)
-    if separation["f1_threshold_db"] is None:
-        raise ZendarError(f"{root}: split {split!r} needs CFAR points both on and off labelled cars to fit the SAR threshold")
-    sar = replace(base.sar, threshold_db=round(2.0 * separation["f1_threshold_db"]) / 2.0)
-    offset = centre_offset_m(frames, replace(base, sar=sar, centre_offset_m=0.0))
-    params = replace(base, sar=sar, centre_offset_m=0.0 if offset is None else round(offset, 2))
+    index = open_dataset(root)
+    if not index.scene_ids(split):
+        raise ZendarError(f"{root}: split {split!r} has no scenes to fit the detection chain on")
+    check_ids = index.scene_ids("val") if split != "val" else []
+    params, fitted = fit_chain(index, index.scene_ids(split), check_ids, cfar_cells_for(base), base, progress=progress)
+    fit = fitted["fit"]
     summary: dict[str, Any] = {
-        "root": str(root), "split": split, "frames": len(frames.points), "cfar_points": int(frames.sar_db.size),
-        "on_car_points": int(frames.on_car.sum()), "outside_sar": int(np.count_nonzero(~np.isfinite(frames.sar_db))),
-        "point_separation": separation, "threshold_db": params.sar.threshold_db, "centre_offset_m": params.centre_offset_m,
-        "ap": chain_ap(frames, params),
+        "root": str(root), "split": split, "frames": fit["frames"], "cfar_points": fit["points"],
+        "on_car_points": fit["on_car_points"], "outside_sar": fit["outside_sar"], "point_separation": fit["point_separation"],
+        "ap": fit["ap"], **fitted,
     }
     if sweep:
+        frames = labelled_frames(index, fit["scenes"], cfar_cells_for(base), base, progress)
         summary["sweep"] = []
         for threshold_db in THRESHOLD_GRID_DB.tolist():
-            trial = replace(base, sar=replace(base.sar, threshold_db=threshold_db), centre_offset_m=0.0)
-            trial_offset = centre_offset_m(frames, trial)
-            trial = replace(trial, centre_offset_m=0.0 if trial_offset is None else round(trial_offset, 2))
+            trial = _offset_for(frames, replace(params, sar=replace(params.sar, threshold_db=threshold_db)))
             summary["sweep"].append({"threshold_db": threshold_db, "centre_offset_m": trial.centre_offset_m, "ap": chain_ap(frames, trial)})
     return params, summary
 

@@ -1,8 +1,11 @@
 """CNN inputs (paper §4.2): the K latest range-Doppler maps of every antenna, stacked over time.
 
 ``log_power_maps`` turns complex cubes ``[N, R, D, A]`` into normalised log-power maps
-``[N, A, R, D]``; ``stack_window`` stacks K consecutive maps into ``[N - K + 1, K * A, R, D]``
-(:class:`zendar_baselines.cnn.mask_frames.MaskFrames` pairs windows with masks for training).
+``[N, A, R, D]``; ``stack_window`` stacks, for every map, the K latest maps up to it into
+``[N, K * A, R, D]`` (:class:`zendar_baselines.cnn.mask_frames.MaskFrames` pairs windows with masks
+for training). A scene's first K - 1 maps have fewer predecessors: their windows repeat the scene's
+first map in place of the missing ones, in training and at test time alike, so every cube of a
+scene gets a prediction.
 
 Channel layout of a window (everywhere): channel ``t * A + a`` is antenna ``a`` of the ``t``-th map of
 the window, oldest first, newest last.
@@ -76,33 +79,36 @@ def log_power_maps(cubes: Any, *, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def window_at(maps: np.ndarray, index: int, k: int) -> np.ndarray:
-    """The input of window ``index``: maps ``index .. index + k - 1`` as ``[k * A, R, D]`` float32.
+def window_at(maps: np.ndarray, newest: int, k: int) -> np.ndarray:
+    """The input whose newest map is ``newest``: maps ``newest - k + 1 .. newest`` as ``[k * A, R, D]`` float32,
+    map 0 standing in for those before the first.
 
     Parameters
     ----------
     maps : ndarray, float32, shape [N, A, R, D]
-    index : int
-        First (oldest) map of the window; ``0 <= index <= N - k``.
+    newest : int
+        Index of the window's newest map; ``0 <= newest < N``.
     k : int
         Maps per window.
     """
-    window = np.asarray(maps[index : index + k], dtype=np.float32)
+    indices = np.maximum(np.arange(newest - k + 1, newest + 1), 0)
+    window = np.asarray(maps[indices[0] : newest + 1], dtype=np.float32)[indices - indices[0]]
     return window.reshape(k * maps.shape[1], maps.shape[2], maps.shape[3])
 
 
 def check_window(maps: Any, k: int, what: str) -> None:
-    """Raise ZendarError (prefixed with ``what``) unless ``maps`` is ``[N, A, R, D]`` and ``1 <= k <= N``."""
-    if getattr(maps, "ndim", None) != 4:
-        raise ZendarError(f"{what}: expected maps of shape [N, A, R, D], found shape {tuple(getattr(maps, 'shape', ()))}")
+    """Raise ZendarError (prefixed with ``what``) unless ``maps`` is ``[N, A, R, D]`` with ``N >= 1`` and ``k >= 1``."""
+    if getattr(maps, "ndim", None) != 4 or maps.shape[0] < 1:
+        raise ZendarError(f"{what}: expected maps of shape [N, A, R, D] with N >= 1, found shape {tuple(getattr(maps, 'shape', ()))}")
     if not isinstance(k, (int, np.integer)) or k < 1:
         raise ZendarError(f"{what}: window k must be a positive integer, found {k!r}")
-    if k > maps.shape[0]:
-        raise ZendarError(f"{what}: window k={k} is longer than the {maps.shape[0]} maps given")
 
 
 def stack_window(maps: np.ndarray, k: int) -> np.ndarray:
-    """Stack every ``k`` consecutive maps over time: row ``i`` holds maps ``i .. i + k - 1``, newest last.
+    """Stack, for every map, the ``k`` latest maps up to it: row ``i`` holds maps ``i - k + 1 .. i``, newest last.
+
+    Maps before the first are the first map repeated (:func:`window_at`), so there is a row for
+    every map, even in a scene shorter than ``k``.
 
     Parameters
     ----------
@@ -112,18 +118,18 @@ def stack_window(maps: np.ndarray, k: int) -> np.ndarray:
 
     Returns
     -------
-    ndarray, float32, shape [N - k + 1, k * A, R, D]
-        Channel ``t * A + a`` of row ``i`` is antenna ``a`` of map ``i + t``.
+    ndarray, float32, shape [N, k * A, R, D]
+        Channel ``t * A + a`` of row ``i`` is antenna ``a`` of map ``max(i - k + 1 + t, 0)``.
 
     Raises
     ------
     ZendarError
-        When ``maps`` is not 4-D or ``k`` is not in ``1 .. N``.
+        When ``maps`` is not 4-D with at least one map, or ``k`` is not a positive integer.
     """
     check_window(maps, k, "stack_window")
     n_maps, n_antennas, n_range, n_doppler = maps.shape
-    stacked = np.empty((n_maps - k + 1, k * n_antennas, n_range, n_doppler), dtype=np.float32)
-    for index in range(len(stacked)):
+    stacked = np.empty((n_maps, k * n_antennas, n_range, n_doppler), dtype=np.float32)
+    for index in range(n_maps):
         stacked[index] = window_at(maps, index, k)
     return stacked
 

@@ -40,14 +40,16 @@ class MaskFrames(Dataset):
     targets : ndarray or path to .npy, uint8, shape [N, R, D]
         Mask of each map's frame: 0 background, 1 moving, 2 uncertain (ignored by the loss).
     window : int
-        K, maps per sample. Sample ``i`` is ``(window_at(inputs, i, K), targets[i + K - 1])``;
-        there are ``N - K + 1`` samples. Windows never cross the arrays given, so build one
-        ``MaskFrames`` per scene and radar and join them with ``torch.utils.data.ConcatDataset``.
+        K, maps per sample. Sample ``i`` is ``(window_at(inputs, i, K), targets[i])``: the window
+        ending at map ``i``, the first map repeated before the scene's start as at test time
+        (:func:`zendar_baselines.cnn.maps.stack_window`); there are ``N`` samples. Windows never
+        cross the arrays given, so build one ``MaskFrames`` per scene and radar and join them with
+        ``torch.utils.data.ConcatDataset``.
 
     Raises
     ------
     ZendarError
-        When shapes disagree, the window is too long, or the targets are not uint8.
+        When shapes disagree, the window is not a positive integer, or the targets are not uint8.
     """
 
     def __init__(self, inputs: np.ndarray | str | os.PathLike, targets: np.ndarray | str | os.PathLike, window: int = 1) -> None:
@@ -71,7 +73,7 @@ class MaskFrames(Dataset):
         return self.window * self.inputs.shape[1]
 
     def __len__(self) -> int:
-        return self.inputs.shape[0] - self.window + 1
+        return self.inputs.shape[0]
 
     def __getitem__(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Sample ``index``: float32 ``[K * A, R, D]`` input and uint8 ``[R, D]`` mask of its newest frame.
@@ -85,10 +87,10 @@ class MaskFrames(Dataset):
         if not -len(self) <= index < len(self):
             raise IndexError(f"MaskFrames index {index} out of range for {len(self)} samples")
         index = index % len(self)
-        target = np.array(self.targets[index + self.window - 1], dtype=MASK_DTYPE)
+        target = np.array(self.targets[index], dtype=MASK_DTYPE)
         if target.max(initial=0) > UNCERTAIN:
             raise ZendarError(
-                f"MaskFrames: mask of frame {index + self.window - 1} holds {int(target.max())}; "
+                f"MaskFrames: mask of frame {index} holds {int(target.max())}; "
                 "expected 0 background, 1 moving, 2 uncertain"
             )
         return torch.from_numpy(window_at(self.inputs, index, self.window).copy()), torch.from_numpy(target)
@@ -96,7 +98,7 @@ class MaskFrames(Dataset):
     def class_counts(self) -> tuple[int, int]:
         """``(background cells, moving cells)`` over the masks of all samples (uncertain cells left out)."""
         background = moving = 0
-        for start in range(self.window - 1, self.targets.shape[0], 256):
+        for start in range(0, self.targets.shape[0], 256):
             block = np.asarray(self.targets[start : start + 256])
             background += int(np.count_nonzero(block == BACKGROUND))
             moving += int(np.count_nonzero(block == MOVING))

@@ -72,6 +72,15 @@ def test_quick_bench_writes_table_one(quick_run):
         assert (out / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     quality = json.loads((out / "autolabel_quality.json").read_text())
     assert set(quality["bands"]) == set(BANDS) and quality["n_frames"] > 0
+    # The chain's constants, fitted per detector on the labelled part and checked on validation.
+    split = json.loads((out / "split" / "split.json").read_text())
+    for fit_dir in [out / "chain_fit" / "cfar", *sorted((out / "rows").glob("*/seed-*"))]:
+        fit = json.loads((fit_dir / "chain_fit.json").read_text())
+        assert fit["summary"]["fit"]["scenes"] == split["labelled"] and fit["summary"]["check"]["source"] == "val"
+        assert fit["fitted"]["cluster_score"] == ("sum" if fit_dir.name == "cfar" else "max")
+    for row in results["rows"]:
+        meta = json.loads((out / row["predictions"]).read_text())["meta"]
+        assert meta["chain_fit"]["threshold_db"] == meta["parameters"]["sar"]["threshold_db"]
 
 
 def test_the_split_never_shows_unlabelled_scenes_labels(quick_run):
@@ -103,7 +112,7 @@ def test_verify_rescores_from_the_checkpoints(quick_run):
 def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(quick_run, monkeypatch):
     """The run scores every CNN through one ScoringScenes (SAR magnitudes and maps read once): a model
     scored on kept scenes, on fresh ones, and with the cache over its budget gives the same bytes."""
-    from zendar_baselines.bench import scoring, steps
+    from zendar_baselines.bench import chain_step, scoring, steps
     from zendar_baselines.bench.configs import get_config
 
     home, _ = quick_run
@@ -114,7 +123,8 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
     recorded = [json.loads((d / "predictions.json").read_text())["results"] for d in seed_dirs]
 
     def score(seed_dir, scenes=None):
-        return scoring.cnn_predictions(root, config, steps.final_checkpoint(seed_dir), "cpu", scenes=scenes)["results"]
+        params, _ = chain_step.read_chain_fit(seed_dir)  # the constants the run fitted on this model's peaks
+        return scoring.cnn_predictions(root, config, steps.final_checkpoint(seed_dir), "cpu", params, scenes)["results"]
 
     with scoring.ScoringScenes(root) as scenes:
         kept = [score(d, scenes) for d in seed_dirs] + [score(seed_dirs[0], scenes)]

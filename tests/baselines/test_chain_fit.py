@@ -1,43 +1,175 @@
-"""The chain fit's point separation: ROC AUC overall and per range band, counted by hand (Mann-Whitney)."""
+"""The chain's constants fitted per run and per detector, and a CNN's peaks on every cube of a scene.
+
+Hand-made labelled frames for the fit's arithmetic and refusals; a tiny simulated dataset (2 training
+scenes, 1 validation, 1 test) for the cached ``chain_fit`` step, its guard and its fallback.
+"""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import torch
+from torch import nn
+
+from zendar_dataset.detection import ChainParams, FramePoints, frame_cube_points
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.format.reader import open_dataset
+from zendar_dataset.sim.generate import synthesize_dataset
+
+from zendar_baselines.bench import chain_step
+from zendar_baselines.bench.configs import get_config
+from zendar_baselines.bench.context import RunContext
+from zendar_baselines.bench.run_directory import RunDirectory
+from zendar_baselines.bench.scoring import cube_probabilities, peak_cells_of
 from zendar_baselines.classical.chain_fit import (
+    CLUSTER_EPS_GRID_M,
     LabelledFrames,
-    point_separation,
-    separation_auc,
+    cfar_cells_for,
+    fit_chain,
+    fit_chain_params,
+    fit_on_frames,
 )
+from zendar_baselines.cnn.maps import log_power_maps
+from zendar_baselines.labels.splits import make_split
 
 
-def _frames(sar_db, on_car, range_m) -> LabelledFrames:
-    return LabelledFrames({}, {}, np.asarray(sar_db, float), np.asarray(on_car, bool), np.asarray(range_m, float))
+def _frames(car_sar_db: tuple[float, float], background_sar_db: float, n_frames: int = 4) -> LabelledFrames:
+    """One scene of ``n_frames`` frames, each with a labelled car at (20, 0) m whose near face gives
+    two points 0.6 m apart, and two background points far from it; the radar at the origin."""
+    frames = LabelledFrames({}, {}, {}, {}, {"scene-a": []})
+    for k in range(n_frames):
+        fid = f"scene-a/{k}"
+        frames.points[fid] = FramePoints(
+            points_xy=np.array([(18.5, 0.3), (18.5, -0.3), (5.0, 30.0), (40.0, -30.0)]), radar_xy=np.zeros((4, 2)),
+            score=np.ones(4), sar_db=np.array([*car_sar_db, background_sar_db, background_sar_db]), dynamic=np.zeros(4, bool),
+        )
+        frames.labels[fid] = np.array([(20.0, 0.0)])
+        frames.on_car[fid] = np.array([True, True, False, False])
+        frames.range_m[fid] = np.hypot(*frames.points[fid].points_xy.T)
+        frames.scene_frames["scene-a"].append(fid)
+    return frames
 
 
-def test_the_auc_per_band_counts_the_pairs_each_band_orders_right():
-    frames = _frames(
-        #  near: on-car darker than the rest | mid: on-car brighter | far: ties | beyond 60 m | no image
-        sar_db=[0.0, 1.0, 5.0, 6.0, 9.0, 3.0, 4.0, 4.0, -9.0, 2.0, np.nan],
-        on_car=[1, 1, 0, 0, 1, 0, 1, 0, 1, 0, 1],
-        range_m=[3.0, 14.9, 8.0, 10.0, 15.0, 29.0, 30.0, 59.0, 70.0, 61.0, 5.0],
-    )
-    separation = point_separation(frames)
-    assert separation["auc_per_band"] == {"near": 1.0, "mid": 0.0, "far": 0.5}
-    assert separation["points_per_band"] == {"near": {"on_car": 2, "other": 2}, "mid": {"on_car": 1, "other": 1},
-                                             "far": {"on_car": 1, "other": 1}}
-    # Overall (every finite value, beyond 60 m included): 5 on-car x 5 other pairs, an on-car value below
-    # the other's counts 1, a tie 1/2.
-    on = np.array([0.0, 1.0, 9.0, 4.0, -9.0])
-    off = np.array([5.0, 6.0, 3.0, 4.0, 2.0])
-    by_hand = ((on[:, None] < off[None, :]).sum() + 0.5 * (on[:, None] == off[None, :]).sum()) / (on.size * off.size)
-    assert separation["auc"] == pytest.approx(by_hand)
+def test_the_fit_by_hand_threshold_offset_and_radius():
+    params, fit = fit_on_frames(_frames((8.0, 9.0), 30.0), ChainParams())
+    # 9 dB is the highest threshold that still takes no background point: F1 = 1, Youden's J = 1.
+    separation = fit["point_separation"]
+    assert (separation["auc"], separation["f1_threshold_db"], separation["youden_threshold_db"], separation["youden_j"]) == (1.0, 9.0, 9.0, 1.0)
+    # Cars at 18.5 m (mid), background at 30.4 m (far) and 50 m (beyond): no band holds both kinds.
+    assert separation["auc_per_band"] == {"near": None, "mid": None, "far": None}
+    assert params.sar.threshold_db == 9.0
+    # Dynamic (< 9 dB): the point at (18.5, 0.3) only, which places its cluster; the label lies
+    # beyond it along the line of sight by (20 - 18.5, -0.3) . (18.5, 0.3) / |(18.5, 0.3)|.
+    expected_offset_m = (1.5 * 18.5 - 0.3 * 0.3) / np.hypot(18.5, 0.3)
+    assert params.centre_offset_m == round(expected_offset_m, 2)
+    assert fit["ap"]["all"] == 1.0  # every car found, nothing else
+    # Every radius gives the same detections: the smallest is kept.
+    assert params.cluster_eps_m == CLUSTER_EPS_GRID_M[0]
+    assert [entry["ap_all"] for entry in fit["radius_grid"]] == [1.0] * len(CLUSTER_EPS_GRID_M)
+    assert fit["frames"] == 4 and fit["points"] == 16 and fit["on_car_points"] == 8
 
 
-def test_a_band_without_on_car_points_has_no_auc_and_the_youden_threshold_cuts_a_clean_split():
-    frames = _frames(sar_db=[0.0, 1.0, 5.0, 6.0, 7.0], on_car=[1, 1, 0, 0, 0], range_m=[5.0, 6.0, 7.0, 20.0, 40.0])
-    separation = point_separation(frames)
-    assert separation["auc_per_band"] == {"near": 1.0, "mid": None, "far": None}
-    assert separation["auc"] == 1.0
-    assert separation["youden_threshold_db"] == 1.0  # every on-car point at or below it, no other point
-    assert separation_auc(np.array([True, False]), np.array([np.nan, 1.0])) is None
+def test_a_fit_without_a_separating_threshold_is_a_clear_error():
+    with pytest.raises(ZendarError, match="no SAR threshold separates the CNN points on labelled cars from the others"):
+        fit_on_frames(_frames((30.0, 31.0), 10.0), ChainParams(), "CNN", "somewhere")  # cars brighter than the rest
+    with pytest.raises(ZendarError, match="8 of 16 points on cars"):
+        fit_on_frames(_frames((20.0, 20.0), 20.0), ChainParams())  # no contrast at all
+
+
+def test_held_out_frames_are_the_last_quarter_of_each_scene():
+    frames = _frames((8.0, 9.0), 30.0, n_frames=8)
+    frames.scene_frames["scene-b"] = []
+    for k in range(2):
+        fid = f"scene-b/{k}"
+        frames.points[fid], frames.labels[fid], frames.on_car[fid] = (frames.points["scene-a/0"], frames.labels["scene-a/0"],
+                                                                      frames.on_car["scene-a/0"])
+        frames.scene_frames["scene-b"].append(fid)
+    fit, check = frames.held_out()
+    assert check.scene_frames == {"scene-a": ["scene-a/6", "scene-a/7"], "scene-b": ["scene-b/1"]}
+    assert list(fit.points) == [f"scene-a/{k}" for k in range(6)] + ["scene-b/0"]
+    assert not set(fit.points) & set(check.points)
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("chain_fit") / "tiny"
+    synthesize_dataset(root, "tiny", n_scenes=4, seed=5, split_ratios=(2, 1, 1), progress=False)
+    return root
+
+
+def test_the_fit_step_is_cached_refits_for_another_split_and_is_checked_on_val(tiny_root, tmp_path, capsys):
+    config = get_config("tiny")
+    context = RunContext.open(tiny_root, config, tmp_path / "out", "cpu")
+    directory = RunDirectory(tmp_path / "out", {"config": config.name})
+    split = make_split(context.dataset, 0.5, seed=0)
+    params, summary, key = chain_step.cfar_chain_step(directory, context, split, "split-key-1")
+    assert "reused" not in capsys.readouterr().err
+    document = json.loads((tmp_path / "out" / chain_step.CFAR_STEP / chain_step.CHAIN_FIT_FILE).read_text())
+    assert document["fitted"]["threshold_db"] == params.sar.threshold_db == summary["threshold_db"]
+    assert summary["fit"]["scenes"] == list(split.labelled) and summary["check"]["source"] == "val"
+    assert summary["check"]["scenes"] == ["scene-0002"] and 0.0 <= summary["check"]["auc"] <= 1.0
+    assert chain_step.read_chain_fit(tmp_path / "out" / chain_step.CFAR_STEP) == (params, summary)
+
+    again = chain_step.cfar_chain_step(directory, context, split, "split-key-1")
+    assert "[chain_fit/cfar] reused" in capsys.readouterr().err and again == (params, summary, key)
+
+    other = next(s for s in (make_split(context.dataset, 0.5, seed=k) for k in range(1, 50)) if s.labelled != split.labelled)
+    refitted = chain_step.cfar_chain_step(directory, context, other, "split-key-2")
+    assert "reused" not in capsys.readouterr().err
+    assert refitted[2] != key and refitted[1]["fit"]["scenes"] == list(other.labelled)
+
+
+def test_the_fit_refuses_the_test_split(tiny_root):
+    index = open_dataset(str(tiny_root))
+    with pytest.raises(ZendarError, match="never on split 'test'"):
+        fit_chain(index, ["scene-0000"], index.scene_ids("test"), cfar_cells_for(ChainParams()), progress=False)
+    with pytest.raises(ZendarError, match="never on split 'test'"):
+        fit_chain_params(tiny_root, "test", progress=False)
+
+
+def test_without_validation_scenes_the_fit_is_checked_on_held_out_training_frames(tiny_root, capsys):
+    index = open_dataset(str(tiny_root))
+    _, summary = fit_chain(index, index.scene_ids("train"), [], cfar_cells_for(ChainParams()), progress=False)
+    warning = capsys.readouterr().err
+    assert "warning:" in warning and "no labelled validation scene" in warning and "held out of the fit" in warning
+    check, fit = summary["check"], summary["fit"]
+    assert check["source"] == "held-out training frames" and check["scenes"] == fit["scenes"] == index.scene_ids("train")
+    with index.open_scene("scene-0000") as reader:
+        n_frames = len(reader.timestamps("sar/" + reader.sensors("sar")[0]))
+    # The last quarter (rounded up) of each of the two scenes' frames.
+    assert check["frames"] == 2 * -(-n_frames // 4) and fit["frames"] == 2 * n_frames - check["frames"]
+
+
+class _MeanOfWindow(nn.Module):
+    """Logit = the mean of every channel of the window: a model whose output is easy to compute by hand."""
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        return inputs.mean(dim=1, keepdim=True)
+
+
+def test_every_cube_of_a_scene_gets_the_models_peaks_the_first_ones_included(tiny_root):
+    index = open_dataset(str(tiny_root))
+    window = 3
+    with index.open_scene(index.scene_ids("test")[0]) as reader:
+        maps = {radar: log_power_maps(reader.array(f"radar/{radar}/cube")) for radar in reader.sensors("radar")}
+        probability = {radar: cube_probabilities(_MeanOfWindow(), m, window, "cpu") for radar, m in maps.items()}
+        for radar, m in maps.items():
+            assert probability[radar].shape == (m.shape[0], *m.shape[2:])
+            # The first cube's window is its own map three times: its mean over antennas.
+            np.testing.assert_allclose(probability[radar][0], 1.0 / (1.0 + np.exp(-m[0].mean(axis=0))), rtol=1e-5)
+            np.testing.assert_allclose(probability[radar][1], 1.0 / (1.0 + np.exp(-(2 * m[0] + m[1]).mean(axis=0) / 3)), rtol=1e-5)
+        cells_of, n_cells = peak_cells_of(probability, floor=0.0), {}
+
+        def recording(radar, k, cube):
+            n_cells[radar, k] = len(cells := cells_of(radar, k, cube))
+            return cells
+
+        n_frames = 0
+        for _, found in frame_cube_points(reader, recording, ChainParams()):
+            assert found and all(len(cube) > 0 for cube in found)  # every frame has points to detect from
+            n_frames += 1
+        assert n_frames == len(reader.timestamps("sar/" + reader.sensors("sar")[0]))
+    # Each radar's first cubes (no full window of 3 behind them) have their peaks too.
+    assert all(n_cells[radar, k] > 0 for radar in maps for k in (0, 1))

@@ -20,8 +20,13 @@ from zendar_baselines.cnn.mask_frames import MaskFrames
 def test_stack_window_by_hand():
     maps = np.array([1.0, 2.0, 3.0, 4.0], dtype=np.float32).reshape(4, 1, 1, 1)
     stacked = stack_window(maps, 2)
-    assert stacked.shape == (3, 2, 1, 1)
-    assert stacked[:, :, 0, 0].tolist() == [[1, 2], [2, 3], [3, 4]]  # newest last
+    assert stacked.shape == (4, 2, 1, 1)  # one window per map: the first one padded with the first map
+    assert stacked[:, :, 0, 0].tolist() == [[1, 1], [1, 2], [2, 3], [3, 4]]  # newest last
+
+
+def test_stack_window_pads_a_scene_shorter_than_the_window():
+    maps = np.array([5.0, 7.0], dtype=np.float32).reshape(2, 1, 1, 1)
+    assert stack_window(maps, 3)[:, :, 0, 0].tolist() == [[5, 5, 5], [5, 5, 7]]
 
 
 def test_stack_window_channel_is_time_major_antenna_minor():
@@ -31,15 +36,15 @@ def test_stack_window_channel_is_time_major_antenna_minor():
         for antenna in range(n_antennas):
             maps[frame, antenna] = 10 * frame + antenna
     stacked = stack_window(maps, k)
-    assert stacked.shape == (n_maps - k + 1, k * n_antennas, 2, 4)
+    assert stacked.shape == (n_maps, k * n_antennas, 2, 4)
     assert stacked.dtype == np.float32
-    for row in range(n_maps - k + 1):
+    for row in range(n_maps):
         for t in range(k):
             for antenna in range(n_antennas):
-                assert np.all(stacked[row, t * n_antennas + antenna] == 10 * (row + t) + antenna)
+                assert np.all(stacked[row, t * n_antennas + antenna] == 10 * max(row - k + 1 + t, 0) + antenna)
 
 
-@pytest.mark.parametrize("k", [0, 6, 1.5])
+@pytest.mark.parametrize("k", [0, -1, 1.5])
 def test_stack_window_refuses_bad_window(k):
     with pytest.raises(ZendarError, match="window k"):
         stack_window(np.zeros((5, 1, 2, 2), dtype=np.float32), k)
@@ -116,16 +121,17 @@ def _maps_and_masks(n_maps=6, n_antennas=2, n_range=4, n_doppler=3):
 def test_mask_frames_pairs_each_window_with_its_newest_mask():
     maps, masks = _maps_and_masks()
     data = MaskFrames(maps, masks, window=3)
-    assert len(data) == 4
+    assert len(data) == 6  # every frame, the first two with the padded windows scoring sees
     assert data.in_channels == 6
     stacked = stack_window(maps, 3)
     for index in range(len(data)):
         inputs, target = data[index]
         assert inputs.dtype == torch.float32 and target.dtype == torch.uint8
         np.testing.assert_array_equal(inputs.numpy(), stacked[index])
-        np.testing.assert_array_equal(target.numpy(), masks[index + 2])
+        np.testing.assert_array_equal(target.numpy(), masks[index])
+    np.testing.assert_array_equal(data[0][0].numpy(), np.concatenate([maps[0]] * 3))
     with pytest.raises(IndexError):
-        data[4]
+        data[6]
 
 
 def test_mask_frames_reads_npy_files_memory_mapped(tmp_path):
@@ -139,14 +145,14 @@ def test_mask_frames_reads_npy_files_memory_mapped(tmp_path):
         for a, b in zip(from_files[index], in_memory[index]):
             assert torch.equal(a, b)
     joined = ConcatDataset([from_files, in_memory])
-    assert len(joined) == 10
-    assert torch.equal(joined[5][0], in_memory[0][0])
+    assert len(joined) == 12
+    assert torch.equal(joined[6][0], in_memory[0][0])
 
 
 def test_mask_frames_class_counts_by_hand():
     maps, masks = _maps_and_masks()
-    # Windows of 2 see the masks of frames 1..5: 12 cells each, one moving and one uncertain.
-    assert MaskFrames(maps, masks, window=2).class_counts() == (5 * 10, 5)
+    # Windows of 2 see the masks of frames 0..5: 12 cells each, one moving and one uncertain.
+    assert MaskFrames(maps, masks, window=2).class_counts() == (6 * 10, 6)
 
 
 def test_mask_frames_refuses_bad_arrays(tmp_path):
@@ -155,12 +161,12 @@ def test_mask_frames_refuses_bad_arrays(tmp_path):
         MaskFrames(maps, masks[:, :3])
     with pytest.raises(ZendarError, match="uint8"):
         MaskFrames(maps, masks.astype(np.int64))
-    with pytest.raises(ZendarError, match="window k=7"):
-        MaskFrames(maps, masks, window=7)
+    with pytest.raises(ZendarError, match="window k"):
+        MaskFrames(maps, masks, window=0)
     with pytest.raises(ZendarError, match="cannot read"):
         MaskFrames(tmp_path / "absent.npy", masks)
     bad = masks.copy()
     bad[4, 0, 0] = 3
     data = MaskFrames(maps, bad, window=2)
     with pytest.raises(ZendarError, match="frame 4 holds 3"):
-        data[3]
+        data[4]

@@ -24,7 +24,7 @@ from zendar_dataset.detection import (
     cube_points,
     cube_power,
     frame_detections,
-    mask_cells,
+    probability_peaks,
     to_frame,
 )
 from zendar_dataset.errors import ZendarError
@@ -107,23 +107,42 @@ def test_one_detection_per_cluster_with_dynamic_points_pushed_along_the_line_of_
     assert frame_detections(FramePoints.concatenate([])) == []
 
 
-def test_mask_cells_are_the_cells_at_or_above_the_threshold_scored_by_probability():
-    probability = np.zeros((8, 4))
-    probability[1, 2], probability[5, 0], probability[6, 3] = 0.5, 0.9, 0.49
-    cells = mask_cells(probability)
-    assert list(zip(cells.range_bin.tolist(), cells.doppler_bin.tolist())) == [(1, 2), (5, 0)]
-    assert cells.score.tolist() == [0.5, 0.9]
+def test_probability_peaks_are_the_local_maxima_above_the_floor_with_doppler_wrapping_round():
+    probability = np.full((8, 6), 0.01)
+    probability[1, 2], probability[1, 3], probability[2, 2] = 0.9, 0.6, 0.7  # one blob: one peak
+    probability[5, 0], probability[5, 5] = 0.4, 0.8  # neighbours across the Doppler wrap: (5, 5) only
+    probability[7, 3] = 0.05  # an isolated peak at the floor
+    probability[3, 5] = 0.04  # an isolated peak below it
+    cells = probability_peaks(probability, floor=0.05)
+    assert list(zip(cells.range_bin.tolist(), cells.doppler_bin.tolist())) == [(1, 2), (5, 5), (7, 3)]
+    assert cells.score.tolist() == [0.9, 0.8, 0.05]
+    assert len(probability_peaks(probability, floor=0.95)) == 0
+
+
+def test_a_clusters_max_score_does_not_grow_with_its_size_while_a_sum_would():
+    def cluster_score(n_points: int, cluster_score: str) -> float:
+        points = FramePoints(
+            points_xy=np.stack([20.0 + 0.5 * np.arange(n_points), np.zeros(n_points)], axis=1), radar_xy=np.zeros((n_points, 2)),
+            score=np.r_[0.9, np.full(n_points - 1, 0.6)], sar_db=np.zeros(n_points), dynamic=np.ones(n_points, bool),
+        )
+        (detection,) = frame_detections(points, ChainParams(cluster_score=cluster_score))
+        return detection["score"]
+
+    assert [cluster_score(n, "max") for n in (1, 2, 5, 20)] == [0.9] * 4
+    assert cluster_score(20, "sum") == pytest.approx(0.9 + 19 * 0.6)
 
 
 def test_bad_inputs_raise_named_errors():
     with pytest.raises(ZendarError, match=r"probability must be \[R, D\]"):
-        mask_cells(np.zeros(5))
+        probability_peaks(np.zeros(5), floor=0.1)
     with pytest.raises(ZendarError, match="RadarCells"):
         RadarCells(np.zeros(3, np.int64), np.zeros(2, np.int64), np.zeros(3))
     with pytest.raises(ZendarError, match="complex range-Doppler cube"):
         cube_power(np.zeros((4, 4, 2)))
     with pytest.raises(ZendarError, match="cluster_eps_m"):
         ChainParams(cluster_eps_m=0.0)
+    with pytest.raises(ZendarError, match="cluster_score must be one of"):
+        ChainParams(cluster_score="mean")
 
 
 @pytest.fixture(scope="module")

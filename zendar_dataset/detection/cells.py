@@ -1,4 +1,4 @@
-"""Range-Doppler cells that enter the detection chain: CFAR peaks of a cube, or a CNN mask's cells."""
+"""Range-Doppler cells that enter the detection chain: CFAR peaks of a cube, or the peaks of a CNN's probability map."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ class RadarCells:
         int64 indices (Doppler bin ``D // 2`` is zero velocity).
     score : numpy.ndarray
         float64 weight of each cell: linear SNR over the CFAR noise estimate (CFAR), or the
-        predicted probability (a CNN's mask).
+        predicted probability (a CNN's peaks).
     """
 
     range_bin: np.ndarray
@@ -76,23 +76,28 @@ def cfar_cells(cube: np.ndarray, params: ChainParams | None = None) -> RadarCell
     return cfar_map(cube_power(cube), params)[0]
 
 
-def mask_cells(probability: np.ndarray, threshold: float = 0.5) -> RadarCells:
-    """The cells of a predicted moving-object mask.
+def probability_peaks(probability: np.ndarray, floor: float) -> RadarCells:
+    """The local peaks of a predicted moving-object probability map, one cell per peak.
+
+    A cell is a peak when it is not smaller than its 8 neighbours, the Doppler axis wrapping round as
+    for the CFAR peaks (:func:`zendar_dataset.radar.cfar.local_maxima`): a car's blob of cells gives
+    one point, as CFAR gives one per peak, instead of a point (with its own DOA) per cell.
 
     Parameters
     ----------
     probability : numpy.ndarray
         ``[R, D]`` float per-cell probability of a moving object.
-    threshold : float
-        Cells with probability at or above this are kept.
+    floor : float
+        Peaks below this probability are dropped (a low floor keeps the whole precision-recall curve;
+        the score, not a cut, orders the detections).
 
     Returns
     -------
     RadarCells
-        Score = the probability.
+        Score = the probability at the peak.
     """
     probability = np.asarray(probability, np.float64)
     if probability.ndim != 2:
-        raise ZendarError(f"mask_cells: probability must be [R, D], got shape {probability.shape}")
-    r_idx, d_idx = np.nonzero(probability >= threshold)
+        raise ZendarError(f"probability_peaks: probability must be [R, D], got shape {probability.shape}")
+    r_idx, d_idx = np.nonzero((probability >= floor) & local_maxima(probability))
     return RadarCells(r_idx.astype(np.int64), d_idx.astype(np.int64), probability[r_idx, d_idx])

@@ -41,7 +41,8 @@ class Cluster:
     radar_xy : numpy.ndarray
         ``[2]`` float64 metres, score-weighted position of the radars that saw them.
     score : float
-        Summed score of the dynamic members times the dynamic share.
+        Summed or maximum score of the dynamic members (:attr:`ChainParams.cluster_score`) times
+        the dynamic share.
     n_points, n_dynamic : int
         Members, and members the SAR test calls dynamic.
     """
@@ -67,7 +68,7 @@ def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> li
     points : FramePoints
         Every radar's points of the frame (:meth:`FramePoints.concatenate` of :func:`to_frame`).
     params : ChainParams, optional
-        ``cluster_eps_m``.
+        ``cluster_eps_m`` and ``cluster_score``.
     """
     params = ChainParams() if params is None else params
     if not np.any(points.dynamic):
@@ -77,10 +78,15 @@ def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> li
     moving = points.dynamic
     n_points = np.bincount(labels, minlength=n_clusters)
     n_dynamic = np.bincount(labels[moving], minlength=n_clusters)
-    score = np.bincount(labels[moving], weights=points.score[moving], minlength=n_clusters)
+    summed = np.bincount(labels[moving], weights=points.score[moving], minlength=n_clusters)
+    if params.cluster_score == "max":
+        score = np.full(n_clusters, -np.inf)
+        np.maximum.at(score, labels[moving], points.score[moving])
+    else:
+        score = summed
     # Placement needs positive finite weights: a cluster whose scores are not falls back to equal ones.
     finite = np.isfinite(points.score[moving])
-    usable = (np.bincount(labels[moving], weights=~finite, minlength=n_clusters) == 0) & (score > 0)
+    usable = (np.bincount(labels[moving], weights=~finite, minlength=n_clusters) == 0) & (summed > 0)
     weights = np.where(usable[labels[moving]], np.where(finite, points.score[moving], 0.0), 1.0)
     total = np.bincount(labels[moving], weights=weights, minlength=n_clusters)
     centre = np.stack([np.bincount(labels[moving], weights=weights * points.points_xy[moving, axis], minlength=n_clusters)

@@ -19,6 +19,12 @@ CLUSTER_EPS_M = 1.5  # about half a car length: one car's scatterers chain into 
 # length: most cars are seen from behind or ahead, in the ego's own street.
 DEFAULT_CENTRE_OFFSET_M = 2.09
 
+# How a cluster's dynamic members' scores make its score (before the dynamic share): their sum, or
+# their maximum. The sum suits CFAR's linear SNRs: heavy-tailed, so a cluster's sum is about its
+# strongest peak's. A CNN's probabilities are bounded by 1, so their sum counts members and big
+# diffuse clusters would rank first; its peaks take the maximum (docs/baselines.md, "Cluster score").
+CLUSTER_SCORES = ("sum", "max")
+
 
 @dataclass(frozen=True)
 class ChainParams:
@@ -35,12 +41,16 @@ class ChainParams:
         cluster).
     centre_offset_m : float
         Each detection moves this far along the line of sight away from the radars.
+    cluster_score : str
+        One of :data:`CLUSTER_SCORES`: a cluster scores the sum (CFAR) or the maximum (CNN peaks)
+        of its dynamic members' scores, times its dynamic share.
     """
 
     cfar_pfa: float = CFAR_PFA
     sar: SarTestParams = field(default_factory=SarTestParams)
     cluster_eps_m: float = CLUSTER_EPS_M
     centre_offset_m: float = DEFAULT_CENTRE_OFFSET_M
+    cluster_score: str = "sum"
 
     def __post_init__(self) -> None:
         if not 0.0 < self.cfar_pfa < 1.0:
@@ -49,6 +59,8 @@ class ChainParams:
             raise ZendarError(f"ChainParams.cluster_eps_m must be > 0 m, got {self.cluster_eps_m!r}")
         if not np.isfinite(self.centre_offset_m):
             raise ZendarError(f"ChainParams.centre_offset_m must be a finite number of metres, got {self.centre_offset_m!r}")
+        if self.cluster_score not in CLUSTER_SCORES:
+            raise ZendarError(f"ChainParams.cluster_score must be one of {CLUSTER_SCORES}, got {self.cluster_score!r}")
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (recorded in the predictions' ``meta``)."""
