@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from zendar_baselines.classical.chain_fit import labelled_frames
+from zendar_baselines.classical.chain_fit import cfar_cells_for, labelled_frames
 from zendar_baselines.classical.sar_test_candidates import (
     CANDIDATES,
     auc_table,
@@ -13,6 +13,8 @@ from zendar_baselines.classical.sar_test_candidates import (
     main,
 )
 
+from zendar_dataset.detection import ChainParams
+from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim.generate import synthesize_dataset
 from zendar_dataset.sim.profiles import get_profile
 
@@ -26,9 +28,10 @@ def tiny_root(tmp_path_factory):
 
 def test_the_chosen_candidate_is_the_chains_value_on_the_chains_points(tiny_root):
     values = candidate_values(tiny_root, "train")
-    frames = labelled_frames(tiny_root, "train", progress=False)
-    np.testing.assert_array_equal(values["on_car"], frames.on_car)
-    np.testing.assert_allclose(values["range_m"], frames.range_m)
+    index = open_dataset(str(tiny_root))
+    frames = labelled_frames(index, index.scene_ids("train"), cfar_cells_for(ChainParams()), progress=False)
+    np.testing.assert_array_equal(values["on_car"], frames.point_on_car)
+    np.testing.assert_allclose(values["range_m"], frames.point_range_m)
     np.testing.assert_allclose(values["minus_snr"], frames.sar_db, atol=1e-4)  # float32 images
     assert np.isfinite(frames.sar_db).sum() > 50
     # Every candidate has a value wherever the reading has one (the backgrounds exist where the peak does).
