@@ -29,8 +29,8 @@ from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.classical import cfar_baseline
 from zendar_baselines.fingerprints import dataset_index, dataset_location
 
-#: Bootstrap resamples (over test scenes) for each row's 95 % interval.
-BOOTSTRAP_RESAMPLES = 200
+#: Bootstrap resamples (over time blocks of the test scenes, :data:`claims.BLOCK_S`) for each row's 95 % interval.
+BOOTSTRAP_RESAMPLES = 1000
 #: Mask cells at or above this probability are the CNN's detections (the sigmoid's midpoint).
 MASK_THRESHOLD = 0.5
 #: Inference batch (frames); memory only, results do not depend on it.
@@ -43,10 +43,25 @@ def cfar_predictions(dataset: DatasetIndex | str | os.PathLike) -> dict[str, Any
 
 
 def score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
-    """``predictions.json`` and the official evaluator's ``metrics.json`` (test split, with a scene
-    bootstrap of :data:`BOOTSTRAP_RESAMPLES`) in ``out_dir``."""
+    """``predictions.json`` and the official evaluator's ``metrics.json`` (test split, with a bootstrap
+    of :data:`BOOTSTRAP_RESAMPLES` over time blocks of :data:`~zendar_baselines.bench.claims.BLOCK_S`)
+    in ``out_dir``.
+
+    Raises
+    ------
+    ZendarError
+        Before writing ``metrics.json``, when the test split has too few time blocks for 100 distinct
+        resamples (the CFAR row is scored first, so a run stops before any training).
+    """
+    from zendar_dataset.eval.paired import require_distinct_resamples
+
+    from zendar_baselines.bench.claims import BLOCK_S
+
     write_json_atomic(out_dir / "predictions.json", predictions)
-    metrics = evaluate(out_dir / "predictions.json", str(root), split="test", bootstrap=BOOTSTRAP_RESAMPLES)
+    metrics = evaluate(out_dir / "predictions.json", str(root), split="test", bootstrap=BOOTSTRAP_RESAMPLES,
+                       bootstrap_block_s=BLOCK_S)
+    require_distinct_resamples(metrics["protocol"]["bootstrap"]["n_units"],
+                               f"{root}: test split, {BLOCK_S:g} s time blocks")
     write_metrics(metrics, out_dir)
 
 
