@@ -7,7 +7,8 @@ ego's own heading (from the poses):
 
 - **turning**: its heading over ground (label yaw + ego yaw, unwrapped) spans at least
   :data:`TURN_SPAN_RAD` over its labelled frames — a car that turns at an intersection changes its
-  course by about 90°, while the ego's own turns cancel out;
+  course by about 90°; a straight car whose relative heading changes only because the ego turns
+  keeps its course and is not turning;
 - otherwise by its mean heading relative to the ego: **ahead** (within 45° of the ego's heading),
   **oncoming** (within 45° of the opposite heading), **crossing** (in between).
 """
