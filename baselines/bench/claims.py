@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.bootstrap import resample_weights
+from zendar_dataset.eval.bootstrap import distinct_resamples, resample_weights
 from zendar_dataset.eval.evaluate import MatchedDetections, frame_units, matched_detections
 from zendar_dataset.eval.paired import (
     FAILS,
@@ -30,8 +30,8 @@ from zendar_dataset.eval.paired import (
     PairedDifference,
     ResampledAP,
     paired_difference,
-    require_distinct_resamples,
     resampled_ap,
+    too_few_resamples,
 )
 from zendar_dataset.eval.protocol import BOOTSTRAP_CONFIDENCE, BOOTSTRAP_UNIT_BLOCK, RANGE_BANDS
 
@@ -156,11 +156,14 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
     dict
         ``{claim: {"statement", "verdict", "resampling", "comparisons": [...]}}``.
 
+        When the split has too few blocks for
+        :data:`~zendar_dataset.eval.protocol.MIN_DISTINCT_RESAMPLES` distinct resamples,
+        ``resampling["problem"]`` says so, no interval is computed and every verdict is undecided.
+
     Raises
     ------
     ZendarError
-        When the rows were not scored on the same frames, or the split has too few blocks for
-        :data:`~zendar_dataset.eval.protocol.MIN_DISTINCT_RESAMPLES` distinct resamples.
+        When the rows were not scored on the same frames.
     """
     first = matched[rows[0].key]
     for row in rows:
@@ -168,16 +171,20 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
             raise ZendarError(f"row {row.key}: scored on other frames than row {rows[0].key}; paired "
                               "comparisons need the same frames")
     frame_unit, n_units = frame_units(first.frame_ids, first.evaluated_frame, block_s)
-    distinct = require_distinct_resamples(n_units, f"test split, {block_s:g} s time blocks")
-    weights = resample_weights(n_units, n_resamples, seed)
+    problem = too_few_resamples(n_units, f"test split, {block_s:g} s time blocks")
+    # Too few units: no resample at all, so every comparison keeps its difference and no interval.
+    weights = resample_weights(n_units, 0 if problem else n_resamples, seed)
     aps = {}
     for row in rows:
         bands = matched[row.key].band_detections(frame_unit)
         aps[row.key] = {band: resampled_ap(bands[band], weights) for band in RANGE_BANDS}
     resampling = {
-        "unit": BOOTSTRAP_UNIT_BLOCK, "block_s": block_s, "n_units": n_units, "distinct_resamples": distinct,
-        "n_resamples": n_resamples, "seed": seed, "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "first",
+        "unit": BOOTSTRAP_UNIT_BLOCK, "block_s": block_s, "n_units": n_units,
+        "distinct_resamples": distinct_resamples(n_units), "n_resamples": n_resamples, "seed": seed,
+        "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "first",
     }
+    if problem:
+        resampling["problem"] = problem
     return {
         name: {"statement": STATEMENTS[name], "verdict": overall_verdict(comparisons), "resampling": resampling,
                "comparisons": [c.to_json() for c in comparisons]}
@@ -207,6 +214,8 @@ def markdown_claims(verdicts: Mapping[str, Any]) -> str:
     summary = [f"- {name.replace('_', ' ')} ({claim['statement']}): **{claim['verdict']}**"
                for name, claim in verdicts.items()]
     resampling = next(iter(verdicts.values()))["resampling"] if verdicts else None
+    if resampling is not None and "problem" in resampling:
+        return "\n".join(lines) + "\n\n" + "\n".join(summary) + f"\n\n**No intervals**: {resampling['problem']}.\n"
     note = "" if resampling is None else (
         f"\nPaired bootstrap of first seeds: {resampling['n_resamples']} shared resamples of "
         f"{resampling['n_units']} units ({resampling['block_s']:g} s time blocks of the test scenes; "

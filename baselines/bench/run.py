@@ -183,6 +183,9 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
     verdicts = claim_verdicts(rows, matched_first_seeds(out, rows, context.root))
+    problem = next(iter(verdicts.values()))["resampling"].get("problem")
+    if problem:
+        say(f"[claims] {problem}")
     cars = split_car_counts(context.dataset, split)
     results = {
         "format": "zendar-bench-results",

@@ -85,12 +85,18 @@ def test_a_failing_comparison_fails_its_claim():
     assert ("densenet-37-pretrained", "near − mid", "undecided") in falls
 
 
-def test_too_few_blocks_and_different_frames_are_refused():
+def test_too_few_blocks_give_no_interval_and_different_frames_are_refused():
     frames = _frames(n_scenes=2, n_frames=35)  # 2 scenes of 3.4 s: 4 blocks of 2 s, 35 distinct resamples
     rows = {"cfar": _found(frames), "densenet-37-supervised": _found(frames), "densenet-37-pretrained": _found(frames)}
-    with pytest.raises(ZendarError, match="4 resampling units give 35 distinct bootstrap resamples"):
-        _run(frames, rows)
-    assert _run(frames, rows, block_s=1.0)["cnn_beats_cfar"]["resampling"]["n_units"] == 6
+    few = _run(frames, rows)
+    for claim in few.values():
+        assert "4 resampling units give 35 distinct bootstrap resamples" in claim["resampling"]["problem"]
+        assert claim["verdict"] == "undecided"
+        assert all(c["ci95"] == [None, None] and c["n_resamples"] == 0 and c["verdict"] == "undecided"
+                   and c["difference"] == 0.0 for c in claim["comparisons"])
+    assert "**No intervals**: test split, 2 s time blocks: 4 resampling units" in markdown_claims(few)
+    enough = _run(frames, rows, block_s=1.0)["cnn_beats_cfar"]["resampling"]
+    assert enough["n_units"] == 6 and "problem" not in enough
     other = _frames(n_scenes=3, n_frames=40)
     matched = {"cfar": matched_detections({"results": _found(frames)}, {"frames": frames}),
                "x": matched_detections({"results": _found(other)}, {"frames": other})}

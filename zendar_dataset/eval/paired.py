@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.bootstrap import (
     BandDetections,
     distinct_resamples,
@@ -114,8 +113,8 @@ def paired_difference(a: ResampledAP, b: ResampledAP) -> PairedDifference:
     return PairedDifference(difference, float(low), float(high), int(both.sum()), verdict(float(low), float(high)))
 
 
-def require_distinct_resamples(n_units: int, where: str) -> int:
-    """The number of distinct resamples of ``n_units`` units; ZendarError when under the minimum.
+def too_few_resamples(n_units: int, where: str) -> str | None:
+    """Why ``n_units`` units cannot give an interval, or None when they give enough distinct resamples.
 
     Parameters
     ----------
@@ -124,17 +123,19 @@ def require_distinct_resamples(n_units: int, where: str) -> int:
     where
         What was cut into units, for the message (``"test split, 2 s time blocks"``).
 
-    Raises
-    ------
-    ZendarError
-        When ``n_units`` give fewer than :data:`~zendar_dataset.eval.protocol.MIN_DISTINCT_RESAMPLES`
-        distinct resamples (fewer than 5 units).
+    Returns
+    -------
+    str or None
+        A message when the units give fewer than
+        :data:`~zendar_dataset.eval.protocol.MIN_DISTINCT_RESAMPLES` distinct resamples (fewer than 5
+        units), else None.
     """
     distinct = distinct_resamples(n_units)
-    if distinct < MIN_DISTINCT_RESAMPLES:
-        raise ZendarError(
-            f"{where}: {n_units} resampling units give {distinct} distinct bootstrap resamples, fewer than "
-            f"{MIN_DISTINCT_RESAMPLES}: intervals would be the spread of a handful of values. Give the split "
-            "more or longer scenes, or resample shorter time blocks (5 units give 126)"
-        )
-    return distinct
+    if distinct >= MIN_DISTINCT_RESAMPLES:
+        return None
+    return (
+        f"{where}: {n_units} resampling units give {distinct} distinct bootstrap resamples, fewer than "
+        f"{MIN_DISTINCT_RESAMPLES}: an interval would be the spread of a handful of values, so none is given "
+        "and every verdict is undecided. Give the split more or longer scenes, or resample shorter time "
+        "blocks (5 units give 126)"
+    )
