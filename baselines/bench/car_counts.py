@@ -144,6 +144,18 @@ def distinct_cars(rows: LabelRows) -> dict[str, dict[str, Any]]:
     return counts
 
 
+def split_car_counts(dataset: DatasetIndex, labelled_scene_ids: tuple[str, ...] | list[str]) -> dict[str, Any]:
+    """:func:`distinct_cars` of the training split's labelled part (``labelled_scene_ids``), the training,
+    validation and test splits: ``{"train_labelled", "train", "val", "test"}``."""
+    train = read_label_rows(dataset, dataset.scene_ids("train"))
+    return {
+        "train_labelled": distinct_cars(train.of_scenes(labelled_scene_ids)),
+        "train": distinct_cars(train),
+        "val": distinct_cars(read_label_rows(dataset, dataset.scene_ids("val"))),
+        "test": distinct_cars(read_label_rows(dataset, dataset.scene_ids("test"))),
+    }
+
+
 def markdown_car_counts(counts_by_split: dict[str, dict[str, dict[str, Any]]]) -> str:
     """A Markdown table: one line per split, per band the distinct cars (ahead/oncoming/crossing/turning)."""
     lines = [

@@ -176,7 +176,7 @@ def _copy_first_seed(row_dir: Path) -> None:
 
 def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: dict[str, Any],
                    elapsed_s: float, split: SemiSupervisedSplit) -> dict[str, Any]:
-    from zendar_baselines.bench.car_counts import markdown_car_counts
+    from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
     from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
     from zendar_baselines.bench.figures import write_bev_figure, write_pr_comparisons
 
@@ -186,7 +186,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     problem = next(iter(verdicts.values()))["resampling"].get("problem")
     if problem:
         say(f"[claims] {problem}")
-    cars = split_car_counts(context.dataset, split)
+    cars = split_car_counts(context.dataset, split.labelled)
     results = {
         "format": "zendar-bench-results",
         "format_version": 1,
@@ -214,19 +214,6 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
                      {_label(row): out / "rows" / row.key / "predictions.json" for row in rows})
     say(table)
     return results
-
-
-def split_car_counts(dataset: DatasetIndex, split: SemiSupervisedSplit) -> dict[str, Any]:
-    """Distinct labelled cars per band (and kind of motion) of the labelled part, train, val and test."""
-    from zendar_baselines.bench.car_counts import distinct_cars, read_label_rows
-
-    train = read_label_rows(dataset, dataset.scene_ids("train"))
-    return {
-        "train_labelled": distinct_cars(train.of_scenes(split.labelled)),
-        "train": distinct_cars(train),
-        "val": distinct_cars(read_label_rows(dataset, dataset.scene_ids("val"))),
-        "test": distinct_cars(read_label_rows(dataset, dataset.scene_ids("test"))),
-    }
 
 
 def _label(row: Row) -> str:
