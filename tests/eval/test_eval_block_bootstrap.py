@@ -148,3 +148,13 @@ def test_cli_option_and_the_few_resamples_note(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
         eval_main(args + ["--bootstrap-block-s", "0"])
     assert exit_info.value.code == 2
+
+
+def test_one_block_is_named_as_a_block_in_the_table():
+    from zendar_dataset.eval.report import format_table
+
+    frames = {f"s/{k * NS // 10}": [{"x": 10.0, "y": 0.0}] for k in range(5)}
+    results = {f: [{"x": 10.0, "y": 0.0, "score": 0.5}] for f in frames}
+    text = format_table(evaluate({"results": results}, {"frames": frames}, bootstrap=10, bootstrap_block_s=5.0))
+    assert "over up to 10 5 s time block resamples" in text
+    assert "one time block: resampling cannot show any spread" in text and "one scene" not in text

@@ -74,7 +74,10 @@ def format_table(metrics: MetricsRecord | Mapping[str, Any]) -> str:
     if bootstrap:
         n = max(interval.n for interval in bootstrap.values())
         lines.append(f"95% CI: percentile bootstrap over up to {n} {bootstrap_unit_text(record.protocol)} resamples per band")
-        n_units = record.protocol.get("bootstrap", {}).get("n_units", record.n_scenes)
+        # Time blocks record how many there were; scenes are the metrics' n_scenes.
+        blocks = record.protocol.get("bootstrap", {}).get("n_units")
+        by_blocks = isinstance(blocks, int) and not isinstance(blocks, bool)
+        n_units = blocks if by_blocks else record.n_scenes
         distinct = distinct_resamples(n_units)
         if 1 < n_units and distinct < MIN_DISTINCT_RESAMPLES:
             lines.append(
@@ -82,8 +85,10 @@ def format_table(metrics: MetricsRecord | Mapping[str, Any]) -> str:
                 f"{MIN_DISTINCT_RESAMPLES}: the interval is the spread of a few values; "
                 "more scenes, or --bootstrap-block-s, give more units)"
             )
-        if record.n_scenes < 2:
-            lines.append("   (one scene: resampling scenes cannot show scene-to-scene spread; the interval is a point)")
+        if n_units < 2:
+            lines.append("   (one time block: resampling cannot show any spread; the interval is a point)"
+                         if by_blocks else
+                         "   (one scene: resampling scenes cannot show scene-to-scene spread; the interval is a point)")
     return "\n".join(lines)
 
 
