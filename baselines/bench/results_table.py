@@ -1,7 +1,8 @@
 """Table 1 of the paper from the benchmark's scored rows: ``results.json``, ``table.md``, ``table.csv``.
 
 Pure functions on the evaluator's metrics: a row's AP per band is the mean over its seeds, with the
-standard deviation across seeds and the evaluator's bootstrap interval (over test scenes) of each seed.
+standard deviation across seeds and the evaluator's bootstrap interval (over time blocks of the test
+scenes) of each seed. The paper's claims are decided in :mod:`zendar_baselines.bench.claims`.
 """
 
 from __future__ import annotations
@@ -170,43 +171,3 @@ def csv_table(rows: list[Row]) -> str:
             + ["" if b not in paper else f"{paper[b]:.3f}" for b in TABLE_BANDS]
         )
     return buffer.getvalue()
-
-
-def claims(rows: list[Row]) -> dict[str, dict[str, Any]]:
-    """The three findings of Table 1, each checked on our rows (mean AP per band).
-
-    - ``cnn_beats_cfar``: every CNN row above CFAR in every band;
-    - ``pretraining_helps``: per architecture, pretrain → fine-tune above supervised-only in every band;
-    - ``ap_falls_with_range``: every row near > mid > far.
-
-    Each entry holds ``holds`` (bool, or None where a band lacks ground truth) and ``failures``
-    (one readable line per comparison that does not hold).
-    """
-    by_key = {(row.method, row.unsupervised, row.supervised): row.ap_mean() for row in rows}
-    cfar = by_key.get(("CFAR", False, False))
-    out: dict[str, dict[str, Any]] = {}
-
-    def verdict(comparisons: list[tuple[str, float | None, float | None]]) -> dict[str, Any]:
-        unknown = [text for text, a, b in comparisons if a is None or b is None]
-        failures = [f"{text}: {100 * a:.1f} <= {100 * b:.1f}" for text, a, b in comparisons
-                    if a is not None and b is not None and not a > b]
-        return {"holds": None if unknown and not failures else not failures, "failures": failures, "unknown": unknown}
-
-    cnn_rows = [row for row in rows if row.method != "CFAR"]
-    out["cnn_beats_cfar"] = verdict([
-        (f"{row.method} ({'pretrained' if row.unsupervised else 'supervised only'}) vs CFAR, {band}",
-         row.ap_mean()[band], None if cfar is None else cfar[band])
-        for row in cnn_rows for band in TABLE_BANDS
-    ])
-    out["pretraining_helps"] = verdict([
-        (f"{method} pretrained vs supervised only, {band}", by_key[(method, True, True)][band],
-         by_key[(method, False, True)][band])
-        for method in dict.fromkeys(row.method for row in cnn_rows)
-        if (method, True, True) in by_key and (method, False, True) in by_key
-        for band in TABLE_BANDS
-    ])
-    out["ap_falls_with_range"] = verdict([
-        (f"{row.method}{' pretrained' if row.unsupervised else ''}: {a} vs {b}", row.ap_mean()[a], row.ap_mean()[b])
-        for row in rows for a, b in zip(TABLE_BANDS, TABLE_BANDS[1:])
-    ])
-    return out

@@ -32,11 +32,12 @@ from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
-from zendar_baselines.bench.results_table import METHOD_NAMES, Row, claims, csv_table, markdown_table
+from zendar_baselines.bench.results_table import METHOD_NAMES, Row, csv_table, markdown_table
 from zendar_baselines.bench.run_directory import RunDirectory, read_json
 
 if TYPE_CHECKING:
     from zendar_baselines.bench.scoring import ScoringScenes
+    from zendar_baselines.labels.splits import SemiSupervisedSplit
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                 _copy_first_seed(run.path / "rows" / key)
                 rows.append(row)
 
-    return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started)
+    return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started, split)
 
 
 def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,
@@ -180,12 +181,18 @@ def _copy_first_seed(row_dir: Path) -> None:
 
 
 def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: dict[str, Any],
-                   elapsed_s: float) -> dict[str, Any]:
+                   elapsed_s: float, split: SemiSupervisedSplit) -> dict[str, Any]:
+    from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
+    from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
     from zendar_baselines.bench.figures import write_bev_figure, write_pr_comparisons
 
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
-    verdicts = claims(rows)
+    verdicts = claim_verdicts(rows, matched_first_seeds(out, rows, context.root))
+    problem = next(iter(verdicts.values()))["resampling"].get("problem")
+    if problem:
+        say(f"[claims] {problem}")
+    cars = split_car_counts(context.dataset, split.labelled)
     results = {
         "format": "zendar-bench-results",
         "format_version": 1,
@@ -196,16 +203,14 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
         "dataset": {"root": str(context.root), "fingerprint": context.fingerprint},
         "rows": [row.to_json() for row in rows],
         "claims": verdicts,
+        "distinct_cars": cars,
         "autolabel_quality": quality["quality"],
         "elapsed_s": round(elapsed_s, 1),
     }
     write_json_atomic(out / "results.json", results)
     table = markdown_table(rows, title)
-    table += "\n" + "\n".join(
-        f"- {name.replace('_', ' ')}: {'holds' if v['holds'] else 'unknown' if v['holds'] is None else 'does not hold'}"
-        + (f" ({'; '.join(v['failures'])})" if v["failures"] else "")
-        for name, v in verdicts.items()
-    ) + "\n"
+    table += "\n### The paper's claims, paired intervals (AP points)\n\n" + markdown_claims(verdicts)
+    table += "\n### Distinct labelled cars\n\n" + markdown_car_counts(cars)
     write_text_atomic(out / "table.md", table)
     write_text_atomic(out / "table.csv", csv_table(rows))
     write_json_atomic(out / "autolabel_quality.json", quality["quality"])

@@ -6,6 +6,10 @@ split is predicted again, with the chain's constants the run fitted for the row 
 cubes. A row reproduces when every band's AP is within :data:`AP_TOLERANCE` of what the run recorded.
 Inference is deterministic on one machine; the tolerance allows for another CPU's or a GPU's float
 rounding moving a few cells across the mask threshold.
+
+The claims' paired intervals are recomputed from the run's recorded first-seed predictions (the same
+resamples, so the same numbers): each comparison's verdict must be the recorded one. A results file
+whose ``claims`` predate paired intervals (no ``comparisons``) has them skipped, and says so.
 """
 
 from __future__ import annotations
@@ -71,8 +75,38 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
     with ScoringScenes(root) as test_scenes:
         for row in rows:
             all_reproduced &= _verify_row(out, row, root, config, device, test_scenes, lines)
+    all_reproduced &= _verify_claims(out, results, root, lines)
     lines.append("every row reproduces" if all_reproduced else "some rows do not reproduce within the tolerance")
     return VerifyReport(all_reproduced, "\n".join(lines))
+
+
+def _verify_claims(out: Path, results: dict, root: Path, lines: list[str]) -> bool:
+    """Recompute the claims from the recorded predictions; True when every verdict is the recorded one."""
+    from zendar_baselines.bench.claims import claim_verdicts, matched_first_seeds
+    from zendar_baselines.bench.results_table import Row
+
+    recorded = results.get("claims")
+    if not isinstance(recorded, dict) or not all(isinstance(c, dict) and "comparisons" in c for c in recorded.values()):
+        lines.append("  claims: recorded without paired intervals (an older results.json), not recomputed")
+        return True
+    rows = [Row(r["key"], r["method"], r["unsupervised"], r["supervised"]) for r in results["rows"]]
+    resampling = next(iter(recorded.values()))["resampling"]
+    again = claim_verdicts(rows, matched_first_seeds(out, rows, root), block_s=resampling["block_s"],
+                           n_resamples=resampling["n_resamples"], seed=resampling["seed"])
+    differing = [
+        f"{name} {was['pair']} {was['band']}: {was['verdict']} -> {now['verdict']}"
+        for name in recorded
+        for was, now in zip(recorded[name]["comparisons"], again.get(name, {}).get("comparisons", []))
+        if was["verdict"] != now["verdict"]
+    ]
+    counts_differ = [name for name in recorded
+                     if len(recorded[name]["comparisons"]) != len(again.get(name, {}).get("comparisons", []))]
+    ok = not differing and not counts_differ
+    n = sum(len(claim["comparisons"]) for claim in recorded.values())
+    lines.append(f"  {'ok  ' if ok else 'DIFF'} claims: {n} paired comparisons recomputed from the recorded predictions"
+                 + "".join(f"\n       {line}" for line in differing)
+                 + "".join(f"\n       {name}: another number of comparisons" for name in counts_differ))
+    return ok
 
 
 def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: str,

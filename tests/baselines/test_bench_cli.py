@@ -64,7 +64,27 @@ def test_quick_bench_writes_table_one(quick_run):
         predictions = json.loads((out / row["predictions"]).read_text())
         assert len(predictions["results"]) == metrics["n_frames"]
     assert set(results["claims"]) == {"cnn_beats_cfar", "pretraining_helps", "ap_falls_with_range"}
+    n_comparisons = {"cnn_beats_cfar": 6 * 3, "pretraining_helps": 3 * 3, "ap_falls_with_range": 7 * 2}
+    for name, claim in results["claims"].items():
+        assert claim["verdict"] in ("holds", "fails", "undecided")
+        assert claim["resampling"]["unit"] == "scene_time_block" and claim["resampling"]["seeds_compared"] == "first"
+        assert len(claim["comparisons"]) == n_comparisons[name]
+        for comparison in claim["comparisons"]:
+            low, high = comparison["ci95"]
+            assert comparison["verdict"] in ("holds", "fails", "undecided")
+            assert low is None or low <= high
+    assert set(results["distinct_cars"]) == {"train_labelled", "train", "val", "test"}
+    # Independently: distinct (scene, track id) within 60 m in the evaluator's ground truth of the test split.
+    from zendar_dataset.format.ground_truth import ground_truth_frames
+
+    frames = ground_truth_frames(results["dataset"]["root"], "test")
+    within = {(f.rpartition("/")[0], car["track_id"]) for f, cars in frames.items() for car in cars
+              if (car["x"] ** 2 + car["y"] ** 2) ** 0.5 < 60.0}
+    test_cars = results["distinct_cars"]["test"]["all"]
+    assert test_cars["cars"] == len(within) == sum(test_cars["by_kind"].values())
     table = (out / "table.md").read_text()
+    assert "| claim | pair | band | difference [95 % interval] | verdict |" in table
+    assert "### Distinct labelled cars" in table
     assert "| CFAR | - | - |" in table and "| 65.0 | 43.0 | 13.3 |" in table  # ours beside the paper's
     with open(out / "table.csv", newline="") as handle:
         assert [line["method"] for line in csv.DictReader(handle)] == [method for method, _, _ in ROWS]
@@ -107,6 +127,7 @@ def test_verify_rescores_from_the_checkpoints(quick_run):
     done = bench("verify", "--out", str(home / "out"), env_home=home)
     assert done.returncode == 0, done.stdout + done.stderr[-2000:]
     assert "every row reproduces" in done.stdout
+    assert "ok   claims: 41 paired comparisons recomputed from the recorded predictions" in done.stdout
 
 
 def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(quick_run, monkeypatch):

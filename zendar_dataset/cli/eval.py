@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from zendar_dataset.cli.arguments import whole_number
+from zendar_dataset.cli.arguments import positive_number, whole_number
 from zendar_dataset.cli.common import run_cli, writing
 from zendar_dataset.cli.interrupt import exit_while_starting
 
@@ -45,6 +45,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help=f"95%% confidence intervals from N scene resamples (at most {MAX_BOOTSTRAP_RESAMPLES:,})",
+    )
+    parser.add_argument(
+        "--bootstrap-block-s",
+        type=positive_number("--bootstrap-block-s"),
+        default=None,
+        metavar="S",
+        help="resample each scene's consecutive frames in time blocks of S seconds instead of whole scenes",
     )
     parser.add_argument("--seed", type=whole_number("--seed", 0), default=0, help="seed (0 or more) for --bootstrap (default 0)")
     parser.add_argument(
@@ -93,6 +100,7 @@ def _run(args: argparse.Namespace) -> int:
             seed=args.seed,
             split=args.split,
             max_bytes=args.max_bytes,
+            bootstrap_block_s=args.bootstrap_block_s,
         )
     except PredictionsError as exc:
         if args.out is not None:

@@ -7,7 +7,9 @@
 from __future__ import annotations
 
 import copy
+import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +17,7 @@ import numpy as np
 
 from zendar_dataset.errors import PredictionsError, ZendarError
 from zendar_dataset.eval.ap import PrecisionRecall, band_steps, curve_from_steps
-from zendar_dataset.eval.bootstrap import BandDetections, bootstrap_intervals
+from zendar_dataset.eval.bootstrap import BandDetections, bootstrap_intervals, distinct_resamples, frame_blocks
 from zendar_dataset.eval.matching import UNMATCHED, match_and_band
 from zendar_dataset.eval.protocol import (
     BAND_NAMES,
@@ -117,35 +119,67 @@ def scene_of(frame_id: str) -> str:
     return frame_id.rpartition("/")[0]
 
 
-def score_tables(
-    predictions: DetectionTable,
-    ground_truth: DetectionTable,
-    *,
-    partial: bool = False,
-    bootstrap: int = 0,
-    seed: int = 0,
-    split: str | None = None,
-    meta: dict[str, Any] | None = None,
-) -> MetricsRecord:
-    """Score validated tables (every prediction frame is a ground-truth frame).
+@dataclass(frozen=True)
+class MatchedDetections:
+    """One predictions file matched to the ground truth, per frame: what AP and the bootstrap read.
+
+    Attributes
+    ----------
+    frame_ids : tuple of str
+        The ground truth's frame ids (F,), ``"<scene_id>/<timestamp_ns>"``.
+    evaluated_frame : numpy.ndarray
+        bool (F,): the frame is evaluated (every frame unless ``partial``).
+    score : numpy.ndarray
+        float64 (P,): each prediction's score.
+    is_tp : numpy.ndarray
+        bool (P,): matched to a ground truth (protocol §2).
+    band_bits : numpy.ndarray
+        uint8 (P,): bit b set when the prediction counts in band ``BAND_NAMES[b]`` (protocol §3).
+    pred_frame : numpy.ndarray
+        int64 (P,): ground-truth frame index of each prediction.
+    gt_frame : numpy.ndarray
+        int64 (G,): frame index of each ground truth.
+    gt_in_band : dict of str to numpy.ndarray
+        Band → bool (G,): the ground truth counts in the band (its range in it, its frame evaluated).
+    """
+
+    frame_ids: tuple[str, ...]
+    evaluated_frame: np.ndarray
+    score: np.ndarray
+    is_tp: np.ndarray
+    band_bits: np.ndarray
+    pred_frame: np.ndarray
+    gt_frame: np.ndarray
+    gt_in_band: dict[str, np.ndarray]
+
+    def band_detections(self, frame_unit: np.ndarray) -> dict[str, BandDetections]:
+        """Each band's detections and ground truths tagged with the resampling unit of their frame.
+
+        Parameters
+        ----------
+        frame_unit
+            int64 (F,): unit of each ground-truth frame (from :func:`frame_units`).
+        """
+        pred_unit = frame_unit[self.pred_frame]
+        gt_unit = frame_unit[self.gt_frame]
+        bands = {}
+        for b, band in enumerate(BAND_NAMES):
+            d_in = (self.band_bits >> b) & 1 == 1
+            bands[band] = BandDetections(
+                self.score[d_in], self.is_tp[d_in], pred_unit[d_in], gt_unit[self.gt_in_band[band]]
+            )
+        return bands
+
+
+def match_tables(predictions: DetectionTable, ground_truth: DetectionTable, *, partial: bool = False) -> MatchedDetections:
+    """Match validated tables once, per frame over all ranges, and band every detection.
 
     Parameters
     ----------
     predictions, ground_truth
-        Validated detection tables.
+        Validated detection tables (every prediction frame is a ground-truth frame).
     partial
-        Evaluate only the ground-truth frames present in the predictions; otherwise every
-        ground-truth frame must be in the predictions.
-    bootstrap
-        Number of scene resamples for confidence intervals (0: none).
-    seed
-        Seed for the resampling.
-    split, meta
-        Recorded as they are: the ground truth's split, the predictions' ``meta`` (default ``{}``).
-
-    Returns
-    -------
-    MetricsRecord
+        Evaluate only the ground-truth frames present in the predictions.
     """
     if predictions.frame_ids == ground_truth.frame_ids:  # the usual case: files listed in one order
         pred_gt_frame = np.arange(len(ground_truth.frame_ids), dtype=np.int64)
@@ -155,9 +189,9 @@ def score_tables(
     if partial:
         evaluated_frame = np.zeros(len(ground_truth.frame_ids), dtype=bool)
         evaluated_frame[pred_gt_frame] = True
-        gt_evaluated = evaluated_frame[ground_truth.frame_of_row]
     else:
-        gt_evaluated = np.ones(len(ground_truth.x_m), dtype=bool)
+        evaluated_frame = np.ones(len(ground_truth.frame_ids), dtype=bool)
+    gt_evaluated = evaluated_frame[ground_truth.frame_of_row]
     band_low_m = np.array([BANDS_M[b][0] for b in BAND_NAMES])
     band_high_m = np.array([BANDS_M[b][1] for b in BAND_NAMES])
     # A TP lives in its ground truth's band, an FP in its own: this is what keeps a correct
@@ -174,19 +208,110 @@ def score_tables(
         band_low_m,
         band_high_m,
     )
-    is_tp = matched != UNMATCHED
     gt_range_m = range_m(ground_truth.x_m, ground_truth.y_m)
+    return MatchedDetections(
+        frame_ids=tuple(ground_truth.frame_ids),
+        evaluated_frame=evaluated_frame,
+        score=predictions.score,
+        is_tp=matched != UNMATCHED,
+        band_bits=band_bits,
+        pred_frame=np.repeat(pred_gt_frame, predictions.counts),
+        gt_frame=np.asarray(ground_truth.frame_of_row, dtype=np.int64),
+        gt_in_band={band: in_band(gt_range_m, band) & gt_evaluated for band in BAND_NAMES},
+    )
 
+
+def frame_units(
+    frame_ids: tuple[str, ...] | list[str], evaluated_frame: np.ndarray, block_s: float | None = None
+) -> tuple[np.ndarray, int]:
+    """The bootstrap's resampling unit of each frame: its scene, or its scene's time block.
+
+    Parameters
+    ----------
+    frame_ids
+        (F,) frame ids ``"<scene_id>/<timestamp_ns>"``.
+    evaluated_frame
+        bool (F,): frames that are resampled; the others get unit -1.
+    block_s
+        None: scenes (in sorted order of their ids). Else each scene's frames cut into blocks of this
+        many seconds (:func:`~zendar_dataset.eval.bootstrap.frame_blocks`), which needs each frame
+        id's part after the last ``/`` to be an integer timestamp in nanoseconds.
+
+    Returns
+    -------
+    (frame_unit, n_units)
+        int64 (F,) and the number of units.
+
+    Raises
+    ------
+    ZendarError
+        With ``block_s``, naming a frame id without an integer timestamp.
+    """
+    evaluated = [f for f, keep in zip(frame_ids, evaluated_frame) if keep]
+    scenes = sorted({scene_of(f) for f in evaluated})
+    scene_index = {name: k for k, name in enumerate(scenes)}
+    frame_unit = np.full(len(frame_ids), -1, dtype=np.int64)
+    where = np.flatnonzero(evaluated_frame)
+    scene_of_frame = np.array([scene_index[scene_of(f)] for f in evaluated], dtype=np.int64)
+    if block_s is None:
+        frame_unit[where] = scene_of_frame
+        return frame_unit, len(scenes)
+    timestamps = []
+    for f in evaluated:
+        stamp = f.rpartition("/")[2]
+        if not stamp.isdigit():
+            raise ZendarError(
+                f"bootstrap over time blocks needs frame ids '<scene_id>/<timestamp_ns>': "
+                f"frame {f!r} has no integer timestamp after its last '/'"
+            )
+        timestamps.append(int(stamp))
+    blocks, n_blocks = frame_blocks(scene_of_frame, np.array(timestamps, dtype=np.int64), block_s)
+    frame_unit[where] = blocks
+    return frame_unit, n_blocks
+
+
+def score_tables(
+    predictions: DetectionTable,
+    ground_truth: DetectionTable,
+    *,
+    partial: bool = False,
+    bootstrap: int = 0,
+    seed: int = 0,
+    split: str | None = None,
+    meta: dict[str, Any] | None = None,
+    bootstrap_block_s: float | None = None,
+) -> MetricsRecord:
+    """Score validated tables (every prediction frame is a ground-truth frame).
+
+    Parameters
+    ----------
+    predictions, ground_truth
+        Validated detection tables.
+    partial
+        Evaluate only the ground-truth frames present in the predictions; otherwise every
+        ground-truth frame must be in the predictions.
+    bootstrap
+        Number of resamples for confidence intervals (0: none).
+    seed
+        Seed for the resampling.
+    split, meta
+        Recorded as they are: the ground truth's split, the predictions' ``meta`` (default ``{}``).
+    bootstrap_block_s
+        None: the bootstrap resamples scenes. Else it resamples each scene's time blocks of this many
+        seconds (:func:`frame_units`).
+
+    Returns
+    -------
+    MetricsRecord
+    """
+    matched = match_tables(predictions, ground_truth, partial=partial)
     ap_by_band: dict[str, float | None] = {}
     counts: dict[str, BandCounts] = {}
     pr_curves: dict[str, PRCurve] = {}
-    gt_masks = {}
     # Per band, one step per distinct score with cumulative TP/FP counts (ties form one step).
-    steps = band_steps(predictions.score, is_tp, band_bits, len(BAND_NAMES))
+    steps = band_steps(matched.score, matched.is_tp, matched.band_bits, len(BAND_NAMES))
     for band, (step_score, tp_cumulative, fp_cumulative) in zip(BAND_NAMES, steps):
-        gt_in = in_band(gt_range_m, band) & gt_evaluated
-        gt_masks[band] = gt_in
-        n_gt = int(gt_in.sum())
+        n_gt = int(matched.gt_in_band[band].sum())
         ap_by_band[band], curve = curve_from_steps(step_score, tp_cumulative, fp_cumulative, n_gt)
         n_tp = int(tp_cumulative[-1]) if len(tp_cumulative) else 0
         n_fp = int(fp_cumulative[-1]) if len(fp_cumulative) else 0
@@ -194,33 +319,27 @@ def score_tables(
         pr_curves[band] = _curve_record(curve)
 
     evaluated_ids = predictions.frame_ids if partial else ground_truth.frame_ids
-    scenes = sorted({frame_id.rpartition("/")[0] for frame_id in evaluated_ids})
+    n_scenes = len({scene_of(frame_id) for frame_id in evaluated_ids})
+    protocol = protocol_dict(bootstrap_block_s if bootstrap else None)
     intervals = None
     if bootstrap:
-        scene_index = {name: k for k, name in enumerate(scenes)}
-        gt_frame_scene = np.array(
-            [scene_index.get(scene_of(f), -1) for f in ground_truth.frame_ids], dtype=np.int64
-        )
-        gt_scene = gt_frame_scene[ground_truth.frame_of_row]
-        pred_scene = np.repeat(gt_frame_scene[pred_gt_frame], predictions.counts)
-        bands = {}
-        for b, band in enumerate(BAND_NAMES):
-            d_in = (band_bits >> b) & 1 == 1
-            bands[band] = BandDetections(
-                predictions.score[d_in], is_tp[d_in], pred_scene[d_in], gt_scene[gt_masks[band]]
-            )
+        frame_unit, n_units = frame_units(matched.frame_ids, matched.evaluated_frame, bootstrap_block_s)
+        bands = matched.band_detections(frame_unit)
         intervals = {
             band: BootstrapInterval(**interval)
-            for band, interval in bootstrap_intervals(bands, len(scenes), bootstrap, seed).items()
+            for band, interval in bootstrap_intervals(bands, n_units, bootstrap, seed).items()
         }
+        if bootstrap_block_s is not None:  # with scenes as units, n_scenes already says how many
+            protocol["bootstrap"]["n_units"] = n_units
+            protocol["bootstrap"]["distinct_resamples"] = distinct_resamples(n_units)
     return MetricsRecord(
         ap=ap_by_band,
         counts=counts,
-        protocol=protocol_dict(),
+        protocol=protocol,
         partial=bool(partial),
         n_frames=len(predictions.frame_ids) if partial else len(ground_truth.frame_ids),
         n_frames_ground_truth=len(ground_truth.frame_ids),
-        n_scenes=len(scenes),
+        n_scenes=n_scenes,
         n_predictions=len(predictions.score),
         meta={} if meta is None else copy.deepcopy(meta),
         pr_curves=pr_curves,
@@ -239,6 +358,60 @@ def _count_argument(name: str, value: Any, low: int, high: int | None) -> int:
     return int(value)
 
 
+def _block_argument(block_s: Any) -> float | None:
+    """``block_s`` as a positive finite float, or None."""
+    if block_s is None:
+        return None
+    if isinstance(block_s, (bool, np.bool_)) or not isinstance(block_s, (int, float, np.integer, np.floating)):
+        raise ZendarError(f"bootstrap_block_s must be a number of seconds, got {type(block_s).__name__} {block_s!r}")
+    if not (math.isfinite(block_s) and block_s > 0):
+        raise ZendarError(f"bootstrap_block_s must be a positive number of seconds, got {block_s}")
+    return float(block_s)
+
+
+def _checked_tables(
+    predictions: Any, ground_truth: Any, *, partial: bool, split: str | None, max_bytes: int
+) -> tuple[CheckedInput, CheckedInput]:
+    """Both inputs read and validated; PredictionsError listing every problem of either."""
+    pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
+    pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
+    gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)
+    problems += pred.problems + gt.problems
+    if pred.frame_ids is not None and gt.frame_ids is not None:
+        problems += frame_set_problems(pred.frame_ids, gt.frame_ids, partial=partial)
+    if problems:
+        noun = "problem" if len(problems) == 1 else "problems"
+        raise PredictionsError(
+            f"{len(problems)} {noun} in the evaluator's input, nothing was scored:\n  "
+            + "\n  ".join(problems),
+            problems,
+        )
+    return pred, gt
+
+
+def matched_detections(
+    predictions: Any, ground_truth: Any, *, split: str | None = None, max_bytes: int = DEFAULT_MAX_BYTES
+) -> MatchedDetections:
+    """The evaluator's matching of a predictions file over every ground-truth frame, before any AP.
+
+    What two detectors' paired comparisons resample (:mod:`zendar_dataset.eval.paired`): the same
+    frames, matched and banded exactly as :func:`evaluate` scores them.
+
+    Parameters
+    ----------
+    predictions, ground_truth, split, max_bytes
+        As for :func:`evaluate` (every ground-truth frame must be in the predictions).
+
+    Raises
+    ------
+    PredictionsError
+        Listing every problem found in either input.
+    """
+    max_bytes = _count_argument("max_bytes", max_bytes, 1, None)
+    pred, gt = _checked_tables(predictions, ground_truth, partial=False, split=split, max_bytes=max_bytes)
+    return match_tables(pred.table, gt.table)
+
+
 def evaluate_record(
     predictions: Any,
     ground_truth: Any,
@@ -248,6 +421,7 @@ def evaluate_record(
     seed: int = 0,
     split: str | None = None,
     max_bytes: int = DEFAULT_MAX_BYTES,
+    bootstrap_block_s: float | None = None,
 ) -> MetricsRecord:
     """Score a predictions file against ground truth under the official protocol, as a typed record.
 
@@ -269,21 +443,11 @@ def evaluate_record(
     bootstrap = _count_argument("bootstrap", bootstrap, 0, MAX_BOOTSTRAP_RESAMPLES)
     seed = _count_argument("seed", seed, 0, None)
     max_bytes = _count_argument("max_bytes", max_bytes, 1, None)
-    pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
-    pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
-    gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)
-    problems += pred.problems + gt.problems
-    if pred.frame_ids is not None and gt.frame_ids is not None:
-        problems += frame_set_problems(pred.frame_ids, gt.frame_ids, partial=partial)
-    if problems:
-        noun = "problem" if len(problems) == 1 else "problems"
-        raise PredictionsError(
-            f"{len(problems)} {noun} in the evaluator's input, nothing was scored:\n  "
-            + "\n  ".join(problems),
-            problems,
-        )
+    bootstrap_block_s = _block_argument(bootstrap_block_s)
+    pred, gt = _checked_tables(predictions, ground_truth, partial=partial, split=split, max_bytes=max_bytes)
     return score_tables(
-        pred.table, gt.table, partial=partial, bootstrap=bootstrap, seed=seed, split=gt.split, meta=pred.meta
+        pred.table, gt.table, partial=partial, bootstrap=bootstrap, seed=seed, split=gt.split, meta=pred.meta,
+        bootstrap_block_s=bootstrap_block_s,
     )
 
 
@@ -296,6 +460,7 @@ def evaluate(
     seed: int = 0,
     split: str | None = None,
     max_bytes: int = DEFAULT_MAX_BYTES,
+    bootstrap_block_s: float | None = None,
 ) -> dict[str, Any]:
     """Score a predictions file against ground truth under the official protocol.
 
@@ -308,14 +473,17 @@ def evaluate(
     partial
         Evaluate only the frames present in the predictions (say so in the output).
     bootstrap
-        Number of scene resamples for 95% confidence intervals (0: none; at most
-        ``MAX_BOOTSTRAP_RESAMPLES``).
+        Number of resamples for 95% confidence intervals (0: none; at most
+        ``MAX_BOOTSTRAP_RESAMPLES``); the unit resampled is the scene unless ``bootstrap_block_s``.
     seed
         Seed for the resampling (0 or more).
     split
         Split of a dataset root (default: ``test`` when labelled, else ``val``).
     max_bytes
         Files larger than this are refused before parsing.
+    bootstrap_block_s
+        Resample each scene's time blocks of this many seconds instead of whole scenes
+        (``protocol.bootstrap`` then says ``"unit": "scene_time_block"`` and ``"block_s"``).
 
     Returns
     -------
@@ -330,7 +498,8 @@ def evaluate(
     PredictionsError
         Listing every problem found in either input.
     ZendarError
-        For an argument out of range (``bootstrap``, ``seed``, ``max_bytes``).
+        For an argument out of range (``bootstrap``, ``seed``, ``max_bytes``, ``bootstrap_block_s``),
+        or time blocks asked of frame ids without an integer timestamp.
 
     Examples
     --------
@@ -347,4 +516,5 @@ def evaluate(
         seed=seed,
         split=split,
         max_bytes=max_bytes,
+        bootstrap_block_s=bootstrap_block_s,
     ).to_json()

@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import functools
 import importlib.metadata
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -52,8 +53,17 @@ MAX_PR_CURVE_POINTS = 10_000
 #: resample draws (N × scenes int64) stay within memory.
 MAX_BOOTSTRAP_RESAMPLES = 100_000
 
-#: Bootstrap confidence level for ``--bootstrap N`` (percentile interval over scene resamples).
+#: Bootstrap confidence level for ``--bootstrap N`` (percentile interval over unit resamples).
 BOOTSTRAP_CONFIDENCE = 0.95
+
+#: Fewest distinct resamples (multisets of units, ``bootstrap.distinct_resamples``) an interval needs to
+#: be more than the spread of a handful of values: 5 units give 126, 4 give 35, 2 give 3.
+MIN_DISTINCT_RESAMPLES = 100
+
+#: Names of the resampling unit in ``protocol.bootstrap.unit``: whole scenes (the default), or each
+#: scene's consecutive frames cut into time blocks of ``block_s`` seconds (``--bootstrap-block-s``).
+BOOTSTRAP_UNIT_SCENE = "scene"
+BOOTSTRAP_UNIT_BLOCK = "scene_time_block"
 
 _PROTOCOL: dict[str, Any] = {
     "name": PROTOCOL_NAME,
@@ -78,7 +88,7 @@ _PROTOCOL: dict[str, Any] = {
     "max_detections_per_frame": MAX_DETECTIONS_PER_FRAME,
     "default_max_bytes": DEFAULT_MAX_BYTES,
     "max_pr_curve_points": MAX_PR_CURVE_POINTS,
-    "bootstrap": {"unit": "scene", "interval": "percentile", "confidence": BOOTSTRAP_CONFIDENCE},
+    "bootstrap": {"unit": BOOTSTRAP_UNIT_SCENE, "interval": "percentile", "confidence": BOOTSTRAP_CONFIDENCE},
 }
 
 
@@ -92,8 +102,14 @@ def _evaluator_version() -> str:
         return __version__
 
 
-def protocol_dict() -> dict[str, Any]:
+def protocol_dict(bootstrap_block_s: float | None = None) -> dict[str, Any]:
     """The protocol as a JSON-ready dict, with the evaluator's version.
+
+    Parameters
+    ----------
+    bootstrap_block_s
+        When given, the bootstrap resamples time blocks of this many seconds within scenes:
+        ``bootstrap.unit`` is :data:`BOOTSTRAP_UNIT_BLOCK` and ``bootstrap.block_s`` is added.
 
     Returns
     -------
@@ -101,8 +117,21 @@ def protocol_dict() -> dict[str, Any]:
         A fresh copy; callers may modify it.
     """
     protocol = copy.deepcopy(_PROTOCOL)
+    if bootstrap_block_s is not None:
+        protocol["bootstrap"]["unit"] = BOOTSTRAP_UNIT_BLOCK
+        protocol["bootstrap"]["block_s"] = float(bootstrap_block_s)
     protocol["evaluator_version"] = _evaluator_version()
     return protocol
+
+
+def bootstrap_unit_text(protocol: Mapping[str, Any]) -> str:
+    """The resampling unit a ``metrics.json`` protocol names, in words: ``"scene"`` or
+    ``"2 s time block"`` (the unit's name as it is when the protocol predates or lacks it)."""
+    bootstrap = protocol.get("bootstrap", {})
+    unit = bootstrap.get("unit", BOOTSTRAP_UNIT_SCENE)
+    if unit == BOOTSTRAP_UNIT_BLOCK and "block_s" in bootstrap:
+        return f"{bootstrap['block_s']:g} s time block"
+    return str(unit)
 
 
 def range_m(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@ from typing import Any
 
 from zendar_dataset.atomic_files import json_text, prepare_out_dir, write_text_atomic
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.eval.protocol import BANDS_M
+from zendar_dataset.eval.bootstrap import distinct_resamples
+from zendar_dataset.eval.protocol import BANDS_M, MIN_DISTINCT_RESAMPLES, bootstrap_unit_text
 from zendar_dataset.eval.records import MetricsRecord, as_metrics_record
 
 METRICS_FILENAME = "metrics.json"
@@ -72,9 +73,22 @@ def format_table(metrics: MetricsRecord | Mapping[str, Any]) -> str:
         lines.append("n/a: the band has no ground truth")
     if bootstrap:
         n = max(interval.n for interval in bootstrap.values())
-        lines.append(f"95% CI: percentile bootstrap over up to {n} scene resamples per band")
-        if record.n_scenes < 2:
-            lines.append("   (one scene: resampling scenes cannot show scene-to-scene spread; the interval is a point)")
+        lines.append(f"95% CI: percentile bootstrap over up to {n} {bootstrap_unit_text(record.protocol)} resamples per band")
+        # Time blocks record how many there were; scenes are the metrics' n_scenes.
+        blocks = record.protocol.get("bootstrap", {}).get("n_units")
+        by_blocks = isinstance(blocks, int) and not isinstance(blocks, bool)
+        n_units = blocks if by_blocks else record.n_scenes
+        distinct = distinct_resamples(n_units)
+        if 1 < n_units and distinct < MIN_DISTINCT_RESAMPLES:
+            lines.append(
+                f"   (only {distinct} distinct resamples of {n_units} units, fewer than "
+                f"{MIN_DISTINCT_RESAMPLES}: the interval is the spread of a few values; "
+                "more scenes, or --bootstrap-block-s, give more units)"
+            )
+        if n_units < 2:
+            lines.append("   (one time block: resampling cannot show any spread; the interval is a point)"
+                         if by_blocks else
+                         "   (one scene: resampling scenes cannot show scene-to-scene spread; the interval is a point)")
     return "\n".join(lines)
 
 

@@ -1,0 +1,144 @@
+"""The paper's claims by paired intervals, and distinct labelled cars by band and kind, on cases worked by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from zendar_baselines.bench.car_counts import LabelRows, distinct_cars, markdown_car_counts, motion_kind
+from zendar_baselines.bench.claims import claim_verdicts, markdown_claims
+from zendar_baselines.bench.results_table import Row
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval.evaluate import matched_detections
+
+NS = 1_000_000_000
+CARS = [{"x": 10.0, "y": 0.0}, {"x": 20.0, "y": 0.0}, {"x": 45.0, "y": 0.0}]  # near, mid, far
+
+
+def _frames(n_scenes=3, n_frames=40):
+    return {f"s{s}/{k * NS // 10}": CARS for s in range(n_scenes) for k in range(n_frames)}
+
+
+def _found(frames, keep=lambda k, car: True, clutter=()):
+    """Every car ``keep`` allows at score 0.5; in every frame, a false alarm 6 m beside each car index in
+    ``clutter``, scored above the cars."""
+    results = {}
+    for k, (f, cars) in enumerate(frames.items()):
+        results[f] = [{**car, "score": 0.5} for i, car in enumerate(cars) if keep(k, i)]
+        results[f] += [{"x": cars[i]["x"], "y": 6.0, "score": 0.8} for i in clutter]
+    return results
+
+
+def _run(frames, predictions_by_row, **options):
+    rows = [
+        Row("cfar", "CFAR", False, False),
+        Row("densenet-37-supervised", "zoom-out DenseNet-37", False, True),
+        Row("densenet-37-pretrained", "zoom-out DenseNet-37", True, True),
+    ]
+    matched = {key: matched_detections({"results": results}, {"frames": frames})
+               for key, results in predictions_by_row.items()}
+    return claim_verdicts(rows, matched, n_resamples=300, **options)
+
+
+def test_verdicts_of_claims_worked_by_hand():
+    frames = _frames()
+    # CFAR: a false alarm above every near and mid car (AP 0.5 there), far car missed every other frame
+    # (AP 0.5): below the CNNs in every band and every resample; flat near = mid = far.
+    cfar = _found(frames, keep=lambda k, i: i < 2 or k % 2 == 0, clutter=(0, 1))
+    # Both CNNs find every car, nothing else: AP 1 everywhere, identical rows.
+    cnn = _found(frames)
+    verdicts = _run(frames, {"cfar": cfar, "densenet-37-supervised": cnn, "densenet-37-pretrained": cnn})
+    beats = verdicts["cnn_beats_cfar"]
+    assert beats["verdict"] == "holds" and len(beats["comparisons"]) == 2 * 3
+    first = beats["comparisons"][0]
+    assert first["pair"] == "zoom-out DenseNet-37 (supervised only) − CFAR" and first["band"] == "near"
+    assert first["difference"] == 0.5 and first["ci95"] == [0.5, 0.5] and first["verdict"] == "holds"
+    assert first["n_resamples"] == 300
+    helps = verdicts["pretraining_helps"]
+    assert helps["verdict"] == "undecided"
+    assert [c["verdict"] for c in helps["comparisons"]] == ["undecided"] * 3
+    assert all(c["difference"] == 0.0 and c["ci95"] == [0.0, 0.0] for c in helps["comparisons"])
+    falls = verdicts["ap_falls_with_range"]
+    assert [c["band"] for c in falls["comparisons"][:2]] == ["near − mid", "mid − far"]
+    assert falls["verdict"] == "undecided"
+    resampling = beats["resampling"]
+    assert resampling == {"unit": "scene_time_block", "block_s": 2.0, "n_units": 6, "distinct_resamples": 462,
+                          "n_resamples": 300, "seed": 0, "confidence": 0.95, "seeds_compared": "first"}
+    table = markdown_claims(verdicts)
+    assert ("| cnn beats cfar | zoom-out DenseNet-37 (supervised only) − CFAR | near | +50.0 [+50.0, +50.0] | holds |"
+            in table)
+    assert "- pretraining helps (" in table and "**undecided**" in table
+
+
+def test_a_failing_comparison_fails_its_claim():
+    frames = _frames()
+    good = _found(frames)
+    # The pretrained row ranks a false alarm above its far car: far AP 0.5 < 1, below supervised;
+    # and its mid beats its far, while near = mid.
+    worse_far = _found(frames, clutter=(2,))
+    verdicts = _run(frames, {"cfar": worse_far, "densenet-37-supervised": good, "densenet-37-pretrained": worse_far})
+    helps = {c["band"]: c["verdict"] for c in verdicts["pretraining_helps"]["comparisons"]}
+    assert helps == {"near": "undecided", "mid": "undecided", "far": "fails"}
+    assert verdicts["pretraining_helps"]["verdict"] == "fails"
+    falls = [(c["better"], c["band"], c["verdict"]) for c in verdicts["ap_falls_with_range"]["comparisons"]]
+    assert ("densenet-37-pretrained", "mid − far", "holds") in falls
+    assert ("densenet-37-pretrained", "near − mid", "undecided") in falls
+
+
+def test_too_few_blocks_give_no_interval_and_different_frames_are_refused():
+    frames = _frames(n_scenes=2, n_frames=35)  # 2 scenes of 3.4 s: 4 blocks of 2 s, 35 distinct resamples
+    rows = {"cfar": _found(frames), "densenet-37-supervised": _found(frames), "densenet-37-pretrained": _found(frames)}
+    few = _run(frames, rows)
+    for claim in few.values():
+        assert "4 resampling units give 35 distinct bootstrap resamples" in claim["resampling"]["problem"]
+        assert claim["verdict"] == "undecided"
+        assert all(c["ci95"] == [None, None] and c["n_resamples"] == 0 and c["verdict"] == "undecided"
+                   and c["difference"] == 0.0 for c in claim["comparisons"])
+    assert "**No intervals**: test split, 2 s time blocks: 4 resampling units" in markdown_claims(few)
+    enough = _run(frames, rows, block_s=1.0)["cnn_beats_cfar"]["resampling"]
+    assert enough["n_units"] == 6 and "problem" not in enough
+    other = _frames(n_scenes=3, n_frames=40)
+    matched = {"cfar": matched_detections({"results": _found(frames)}, {"frames": frames}),
+               "x": matched_detections({"results": _found(other)}, {"frames": other})}
+    with pytest.raises(ZendarError, match="row x: scored on other frames than row cfar"):
+        claim_verdicts([Row("cfar", "CFAR", False, False), Row("x", "FPN ResNet-34", False, True)], matched)
+
+
+def _heading(deg):
+    return np.radians(np.asarray(deg, dtype=float))
+
+
+def test_kinds_of_motion_from_headings():
+    steps = np.linspace(0.0, 1.0, 30)
+    straight_ego = np.zeros(30)
+    assert motion_kind(_heading(5 * np.sin(6 * steps)), straight_ego) == "ahead"
+    assert motion_kind(_heading(178 + 4 * steps), straight_ego) == "oncoming"  # wraps through ±180°
+    assert motion_kind(_heading(-90 + 0 * steps), straight_ego) == "crossing"
+    # Out of a cross street into the oncoming lane: course 90° -> 180° over ground.
+    assert motion_kind(_heading(90 + 90 * steps), straight_ego) == "turning"
+    # A straight crossing car seen while the ego turns 60° left: its relative heading falls from 90° to
+    # 30°, its course over ground stays 90°: crossing, not turning.
+    ego = _heading(60 * steps)
+    assert motion_kind(_heading(90 - 60 * steps), ego) == "crossing"
+    # A car ahead following the ego through the same turn turns over ground with it.
+    assert motion_kind(_heading(0 * steps), ego) == "turning"
+
+
+def test_distinct_cars_per_band_count_each_car_of_each_scene_once():
+    # Scene 0, track 1: near then mid (two frames each); scene 1, track 1 (another car): far;
+    # scene 0, track 2: always beyond 60 m (in no band).
+    rows = LabelRows(
+        scene_ids=("a", "b"),
+        scene=np.array([0, 0, 0, 0, 1, 0]),
+        timestamp_ns=np.array([0, 1, 2, 3, 0, 0]) * NS // 10,
+        track_id=np.array([1, 1, 1, 1, 1, 2]),
+        x_m=np.array([5.0, 14.0, 16.0, 29.0, 50.0, 70.0]),
+        y_m=np.zeros(6),
+        yaw_rad=np.array([0.0, 0.0, 0.0, 0.0, np.pi, np.pi / 2]),
+        ego_yaw_rad=np.zeros(6),
+    )
+    counts = distinct_cars(rows)
+    assert {band: c["cars"] for band, c in counts.items()} == {"near": 1, "mid": 1, "far": 1, "all": 2}
+    assert counts["all"]["by_kind"] == {"ahead": 1, "oncoming": 1, "crossing": 0, "turning": 0}
+    assert distinct_cars(rows.of_scenes(["b"]))["all"]["cars"] == 1
+    assert "| test | 1 (1/0/0/0) | 1 (1/0/0/0) | 1 (0/1/0/0) | 2 (1/1/0/0) |" in markdown_car_counts({"test": counts})
