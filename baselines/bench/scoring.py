@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +16,9 @@ from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.detection import (
-    ChainParams, FramePoints, RadarCells, frame_cube_points, frame_detections, probability_peaks, to_frame,
+    ChainParams, FramePoints, frame_cube_points, frame_detections, probability_peaks, to_frame,
 )
+from zendar_dataset.detection.scene import CellsOf
 from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import write_metrics
 from zendar_dataset.format import frame_id
@@ -27,6 +28,7 @@ from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.classical import cfar_baseline
+from zendar_baselines.classical.chain_fit import CellsFor
 from zendar_baselines.fingerprints import dataset_index, dataset_location
 
 #: Bootstrap resamples (over time blocks of the test scenes, :data:`claims.BLOCK_S`) for each row's 95 % interval.
@@ -148,7 +150,6 @@ class ScoringScenes:
         return scene.maps[radar]
 
 
-CellsOf = Callable[[str, int, np.ndarray], RadarCells]
 
 
 def load_model(checkpoint: Path, device: str) -> tuple[Any, dict[str, Any]]:
@@ -182,7 +183,7 @@ def peak_cells_of(probability: dict[str, np.ndarray], floor: float = PEAK_FLOOR)
     return lambda radar, k, cube: probability_peaks(probability[radar][k], floor)
 
 
-def model_cells_for(model, window: int, device: str) -> Callable[[SceneReader], CellsOf]:
+def model_cells_for(model, window: int, device: str) -> CellsFor:
     """For any open scene, the cells of its cubes by ``model``'s peaks (the CNN rows' fit of the chain,
     :mod:`zendar_baselines.classical.chain_fit`)."""
     from zendar_baselines.cnn.maps import log_power_maps

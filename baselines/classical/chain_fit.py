@@ -53,13 +53,13 @@ from zendar_dataset.detection import (
     ChainParams,
     FramePoints,
     LabelBoxes,
-    RadarCells,
     cfar_cells,
     frame_clusters,
     frame_cube_points,
     frame_detections,
     to_frame,
 )
+from zendar_dataset.detection.scene import CellsOf
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval import evaluate_record
 from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
@@ -80,7 +80,6 @@ HELD_OUT_SHARE = 0.25
 #: The split whose scenes the chain is never fitted on, nor checked on.
 GUARDED_SPLIT = "test"
 
-CellsOf = Callable[[str, int, np.ndarray], RadarCells]
 #: For an open scene, the cells of each of its cubes: ``cells_for(reader)(radar, cube_index, cube)``.
 CellsFor = Callable[[SceneReader], CellsOf]
 

@@ -14,6 +14,7 @@ car's SAR energy is spread over a patch of pixels as speckle.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -203,3 +204,15 @@ def test_bad_settings_and_points_raise_named_errors(scene):
         sar_db_at(sar, np.zeros((4, 2)), T0_NS, rd_snr_db=np.zeros(4))
     with pytest.raises(ZendarError, match=r"rd_snr_db must be \[N\] with N = 4"):
         sar_db_at(sar, np.zeros((4, 3)), T0_NS, rd_snr_db=np.zeros(3))
+
+
+def test_cfar_cells_carry_the_snr_the_cube_gives():
+    rng = np.random.default_rng(3)
+    cube = (rng.normal(size=(64, 32, 4)) + 1j * rng.normal(size=(64, 32, 4))).astype(np.complex64)
+    cube[20, 5] *= 40.0
+    cube[41, 30] *= 25.0
+    cells = cfar_cells(cube)
+    assert len(cells) >= 2 and cells.snr_db is not None
+    from_cube = cell_snr_db(cube, dataclasses.replace(cells, snr_db=None))
+    np.testing.assert_allclose(cell_snr_db(cube, cells), from_cube, rtol=1e-12)
+    np.testing.assert_allclose(cells.snr_db, 10.0 * np.log10(cells.score), rtol=1e-12)

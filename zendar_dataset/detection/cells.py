@@ -22,14 +22,20 @@ class RadarCells:
     score : numpy.ndarray
         float64 weight of each cell: linear SNR over the CFAR noise estimate (CFAR), or the
         predicted probability (a CNN's peaks).
+    snr_db : numpy.ndarray or None
+        float64 each cell's power over the CA-CFAR noise estimate, dB, where the cells' maker
+        already has it (:func:`cfar_map`); None otherwise
+        (:func:`zendar_dataset.detection.points.cell_snr_db` then computes it from the cube).
     """
 
     range_bin: np.ndarray
     doppler_bin: np.ndarray
     score: np.ndarray
+    snr_db: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        shapes = {name: np.shape(getattr(self, name)) for name in ("range_bin", "doppler_bin", "score")}
+        names = ("range_bin", "doppler_bin", "score") + (("snr_db",) if self.snr_db is not None else ())
+        shapes = {name: np.shape(getattr(self, name)) for name in names}
         if len(set(shapes.values())) != 1 or len(shapes["score"]) != 1:
             raise ZendarError(f"RadarCells fields must all be [N] arrays, got shapes {shapes}")
 
@@ -66,9 +72,10 @@ def cfar_map(power: np.ndarray, params: ChainParams | None = None) -> tuple[Rada
     result = cfar_2d(power, method="ca", pfa=params.cfar_pfa)
     r_idx, d_idx = np.nonzero(result.mask & local_maxima(power))
     noise = result.noise_power
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         snr = power[r_idx, d_idx] / noise[r_idx, d_idx]
-    return RadarCells(r_idx.astype(np.int64), d_idx.astype(np.int64), snr), noise
+        snr_db = 10.0 * np.log10(snr)
+    return RadarCells(r_idx.astype(np.int64), d_idx.astype(np.int64), snr, snr_db), noise
 
 
 def cfar_cells(cube: np.ndarray, params: ChainParams | None = None) -> RadarCells:

@@ -124,6 +124,8 @@ def cell_snr_db(cube: np.ndarray, cells: RadarCells, params: ChainParams | None 
     """
     if len(cells) == 0:
         return np.zeros(0)
+    if cells.snr_db is not None:  # CFAR cells: the same power and noise estimate, computed once
+        return np.asarray(cells.snr_db, np.float64)
     power = cube_power(cube)
     noise = cfar_map(power, params)[1]
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -14,6 +14,9 @@ from zendar_dataset.geometry.frames import EgoPoses
 from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.sync import latest_at_or_before, resolve_reference
 
+#: ``cells_of(radar, cube_index, cube) -> RadarCells``: the cells of one cube ``[R, D, A]`` that enter the chain.
+CellsOf = Callable[[str, int, np.ndarray], RadarCells]
+
 
 def latest_cube(cube_timestamps_ns: np.ndarray, frame_ns: int) -> int | None:
     """Index of the latest cube at or before ``frame_ns`` (the loader's rule,
@@ -28,7 +31,7 @@ def frame_timestamps(reader: SceneReader) -> np.ndarray:
 
 
 def frame_cube_points(
-    reader: SceneReader, cells_of: Callable[[str, int, np.ndarray], RadarCells], params: ChainParams | None = None, *,
+    reader: SceneReader, cells_of: CellsOf, params: ChainParams | None = None, *,
     poses: EgoPoses | None = None, sar: SarFrames | None = None,
 ) -> Iterator[tuple[int, list[CubePoints]]]:
     """Per frame of a scene, each radar's latest cube at or before it, its cells placed and SAR-tested.
