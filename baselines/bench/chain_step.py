@@ -112,3 +112,19 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
     params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"]), cluster_eps_m=fitted["cluster_eps_m"],
                      centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"])
     return params, summary
+
+
+def chain_fit_record(step_dir: Path) -> dict[str, Any]:
+    """A fit's entry of ``results.json``: the fitted constants and how well the SAR test separated the
+    detector's points on labelled cars from the others (ROC AUC, all and per band) on the fitting
+    frames and on the check's, with the chain's AP on the check's."""
+    params, summary = read_chain_fit(step_dir)
+    fit, check = summary["fit"], summary["check"]
+    separation = fit["point_separation"]
+    return {
+        "threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
+        "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score,
+        "sar_test_auc": {"fit": {"all": separation["auc"], **separation["auc_per_band"]},
+                         "check": {"all": check["auc"], **check["auc_per_band"]}},
+        "check_source": check["source"], "check_ap": check["ap"],
+    }

@@ -183,6 +183,7 @@ def _copy_first_seed(row_dir: Path) -> None:
 def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: dict[str, Any],
                    elapsed_s: float, split: SemiSupervisedSplit) -> dict[str, Any]:
     from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
+    from zendar_baselines.bench.chain_step import CFAR_STEP, chain_fit_record
     from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
     from zendar_baselines.bench.figures import write_bev_figure, write_pr_comparisons
 
@@ -193,6 +194,9 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     if problem:
         say(f"[claims] {problem}")
     cars = split_car_counts(context.dataset, split.labelled)
+    chain_fits = {"cfar": chain_fit_record(out / CFAR_STEP)}
+    chain_fits.update({row.key: [chain_fit_record(out / "rows" / row.key / f"seed-{seed}") for seed in range(seeds)]
+                       for row in rows if row.supervised})
     results = {
         "format": "zendar-bench-results",
         "format_version": 1,
@@ -204,6 +208,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
         "rows": [row.to_json() for row in rows],
         "claims": verdicts,
         "distinct_cars": cars,
+        "chain_fit": chain_fits,
         "autolabel_quality": quality["quality"],
         "elapsed_s": round(elapsed_s, 1),
     }

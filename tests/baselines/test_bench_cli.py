@@ -101,6 +101,14 @@ def test_quick_bench_writes_table_one(quick_run):
     for row in results["rows"]:
         meta = json.loads((out / row["predictions"]).read_text())["meta"]
         assert meta["chain_fit"]["threshold_db"] == meta["parameters"]["sar"]["threshold_db"]
+    # results.json records every fit: the constants and the SAR test's ROC AUC per band, fit and check.
+    fits = results["chain_fit"]
+    assert set(fits) == {"cfar"} | {row["key"] for row in results["rows"] if row["supervised"]}
+    cfar_fit = json.loads((out / "chain_fit" / "cfar" / "chain_fit.json").read_text())
+    assert fits["cfar"]["threshold_db"] == cfar_fit["fitted"]["threshold_db"]
+    assert fits["cfar"]["sar_test_auc"]["fit"] == {"all": cfar_fit["summary"]["fit"]["point_separation"]["auc"],
+                                                   **cfar_fit["summary"]["fit"]["point_separation"]["auc_per_band"]}
+    assert set(fits["cfar"]["sar_test_auc"]["check"]) == set(BANDS)
 
 
 def test_the_split_never_shows_unlabelled_scenes_labels(quick_run):
