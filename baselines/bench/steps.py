@@ -258,7 +258,8 @@ def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatD
     The validation scenes' manual-label masks (``labels.validation_dir``) when the dataset has
     validation scenes. Otherwise the last :data:`HOLD_OUT_FRACTION` of every labelled scene's and
     radar's samples, ``K - 1`` samples apart from the rest (so no map is in both), are held out of
-    the manual-label training data, with a warning on stderr.
+    the manual-label training data, with a warning on stderr. Either way every K-th window is kept
+    (windows that share no map).
 
     Returns
     -------
@@ -267,19 +268,30 @@ def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatD
     validation : ConcatDataset
     record : dict
         ``source`` (``"val split"`` or ``"held-out labelled training frames"``), ``scenes``,
-        ``n_samples``, and ``fraction`` for held-out frames.
+        ``window_stride`` (K), ``n_samples``, and ``fraction`` for held-out frames.
     """
     from zendar_baselines.cnn.training import hold_out_tail
 
+    window = run.config.window
     scene_ids = run.dataset.scene_ids("val")
     if scene_ids:
-        validation = _frames(run, scene_ids, labels.validation_dir / STORE_DIR)
-        return labelled, validation, {"source": "val split", "scenes": scene_ids, "n_samples": len(validation)}
-    labelled, validation = hold_out_tail(labelled, HOLD_OUT_FRACTION, gap=run.config.window - 1)
+        validation = _every_kth(_frames(run, scene_ids, labels.validation_dir / STORE_DIR), window)
+        return labelled, validation, {"source": "val split", "scenes": scene_ids, "window_stride": window,
+                                      "n_samples": len(validation)}
+    labelled, held_out = hold_out_tail(labelled, HOLD_OUT_FRACTION, gap=window - 1)
+    validation = _every_kth(held_out, window)
     print(f"warning: {run.root} has no validation scenes; the last {HOLD_OUT_FRACTION:.0%} of every labelled "
           "training scene's frames are held out of training to choose the checkpoints", file=sys.stderr, flush=True)
     return labelled, validation, {"source": "held-out labelled training frames", "scenes": list(labels.split.labelled),
-                                  "fraction": HOLD_OUT_FRACTION, "n_samples": len(validation)}
+                                  "fraction": HOLD_OUT_FRACTION, "window_stride": window, "n_samples": len(validation)}
+
+
+def _every_kth(data: ConcatDataset, k: int) -> ConcatDataset:
+    # Windows k apart share no map: the validation loss costs 1/k of every window's and loses
+    # little, as neighbouring windows hold K - 1 of the same maps.
+    from torch.utils.data import ConcatDataset, Subset
+
+    return ConcatDataset([Subset(part, range(0, len(part), k)) for part in data.datasets])
 
 
 def _finite(values) -> list[float | None]:

@@ -37,6 +37,11 @@ CNN_AP_TOLERANCE = 0.015
 BANDS = BAND_NAMES
 
 
+def ap_tolerance(row_key: str) -> float:
+    """Largest |AP difference| per band for a row to count as reproduced: CFAR's or the CNN rows'."""
+    return CFAR_AP_TOLERANCE if row_key == "cfar" else CNN_AP_TOLERANCE
+
+
 @dataclass(frozen=True)
 class VerifyReport:
     """Outcome of :func:`verify_run`: ``reproduced`` for every row, and a readable ``text``."""
@@ -103,8 +108,7 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
         worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
                     default=0.0)
         same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
-        tolerance = CFAR_AP_TOLERANCE if key == "cfar" else CNN_AP_TOLERANCE
-        ok = same_bands and worst <= tolerance and not math.isnan(worst)
+        ok = same_bands and worst <= ap_tolerance(key) and not math.isnan(worst)
         all_reproduced &= ok
         shown = " ".join(f"{b} {format_percent(recorded[b])}->{format_percent(again[b])}" for b in BANDS)
         lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")
