@@ -3,7 +3,7 @@
 ``train`` fits a model that maps stacked range-Doppler maps ``[B, C, R, D]`` to per-cell logits
 ``[B, 1, R, D]`` with Adam and a binary cross-entropy on the cells whose mask is 0 (background) or 1
 (moving); uncertain cells (2) give no gradient. After every epoch it measures the same loss on
-validation data (when given), keeps the checkpoint of the epoch with the lowest validation loss and
+validation data (when given; weighted by the validation masks' own class balance), keeps the checkpoint of the epoch with the lowest validation loss and
 that of the last epoch (older ones are removed), and may stop early. Called again with the same
 inputs, it resumes from the latest checkpoint of the run, reproducing an uninterrupted run exactly.
 
@@ -417,8 +417,10 @@ def train(
         (pretraining → fine-tuning); the optimizer starts fresh.
     validation : Dataset, optional
         Samples as ``data``'s; after every epoch the model (in eval mode) is scored on them with the
-        training loss and positive weight, and the epoch of the lowest score is chosen (the earliest
-        of equal ones). None: the last epoch is chosen and ``schedule.patience`` must be None.
+        training loss, its positive weight counted on the validation masks (so that the losses of
+        phases and rows scored on the same masks compare), and the epoch of the lowest score is
+        chosen (the earliest of equal ones). None: the last epoch is chosen and
+        ``schedule.patience`` must be None.
     progress : bool
         Show a tqdm bar with the epoch and running loss (rank 0 only).
     description : str
@@ -482,6 +484,8 @@ def train(
             pos_weight = float(checkpoint["pos_weight"])
         else:
             pos_weight = positive_class_weight(data)
+        # The validation masks' own weight: validation losses then compare across phases and rows.
+        validation_pos_weight = None if validation is None else positive_class_weight(validation)
 
         sampler = DistributedSampler(
             data, num_replicas=process.world_size, rank=process.rank, shuffle=True, seed=seed, drop_last=False
@@ -523,7 +527,7 @@ def train(
                 train_loss = _train_epoch(trained, loader, optimizer, pos_weight, process, bar, epoch, schedule.epochs, description)
                 validation_loss = None
                 if validation_loader is not None:
-                    validation_loss = _validation_loss(model, validation_loader, pos_weight, process)
+                    validation_loss = _validation_loss(model, validation_loader, validation_pos_weight, process)
                     bar.set_postfix(loss=f"{train_loss:.4f}", val=f"{validation_loss:.4f}")
                 history.add(train_loss, validation_loss)
                 if process.is_main:
@@ -533,6 +537,7 @@ def train(
                             "run": identity,
                             **history.to_checkpoint(),
                             "pos_weight": pos_weight,
+                            "validation_pos_weight": validation_pos_weight,
                             "rng_state": {"seed": int(seed), "derivation": "SeedSequence([seed, epoch, rank]) at each epoch's start"},
                         },
                     )

@@ -278,15 +278,17 @@ class BiasOnly(torch.nn.Module):
 
 
 N_CELLS = 50 * 20
-VALIDATION_MOVING = 818  # of the labelled cells: the validation loss is least at logit(0.818) = 1.50
+VALIDATION_MOVING = 47  # of the labelled cells; the validation masks' positive weight is sqrt(953 / 47)
 
 
 def _bias_task(n_samples=4):
-    """Training masks all moving (the bias only rises: ~0.5 per Adam step of lr 0.5), and validation
-    masks 81.8 % moving with an uncertain row (left out): validation loss falls until the bias passes
-    1.50 (epoch 3) and rises after."""
+    """Training masks all background (the bias only falls: ~0.5 per Adam step of lr 0.5), and validation
+    masks 4.7 % moving with an uncertain row (left out). Weighted by the validation masks' own positive
+    weight w = sqrt(953 / 47), the validation loss is least where sigmoid(b) = w q / (w q + 1 - q), at
+    b = -1.50 (epoch 3), and rises after; weighted by the training masks' (1.0) it would be least at
+    b = logit(0.047) = -3.01 (epoch 6)."""
     inputs = np.zeros((n_samples, 1, 50, 20), np.float32)
-    train_masks = np.ones((n_samples, 50, 20), np.uint8)
+    train_masks = np.zeros((n_samples, 50, 20), np.uint8)
     validation_masks = np.zeros((n_samples, 51, 20), np.uint8)
     validation_masks.reshape(n_samples, -1)[:, :VALIDATION_MOVING] = 1
     validation_masks[:, 50, :] = 2
@@ -295,8 +297,11 @@ def _bias_task(n_samples=4):
 
 
 def _validation_loss_by_hand(bias: float) -> float:
-    q = VALIDATION_MOVING / N_CELLS  # pos_weight 1: the training masks have no background cell
-    return -(q * math.log(1 / (1 + math.exp(-bias))) + (1 - q) * math.log(1 - 1 / (1 + math.exp(-bias))))
+    q = VALIDATION_MOVING / N_CELLS
+    weight = math.sqrt((N_CELLS - VALIDATION_MOVING) / VALIDATION_MOVING)
+    p = 1 / (1 + math.exp(-bias))
+    # Summed over cells and divided by their number: the mean per labelled cell.
+    return -(weight * q * math.log(p) + (1 - q) * math.log(1 - p))
 
 
 BIAS_SCHEDULE = Schedule(lr=0.5, batch_size=4, epochs=10, patience=2)
@@ -318,7 +323,7 @@ def test_the_epoch_of_least_validation_loss_is_chosen_and_training_stops_after_p
         bias = float(checkpoint["model_state"]["bias"])
         recorded = checkpoint["validation_losses"][checkpoint["epoch"] - 1]
         assert recorded == pytest.approx(_validation_loss_by_hand(bias), rel=1e-5)
-    assert float(best["model_state"]["bias"]) < 1.5 + 0.5 and last["best_epoch"] == 3
+    assert -2.0 < float(best["model_state"]["bias"]) < -1.0 and last["best_epoch"] == 3
     assert last["validation_losses"] == list(result.validation_losses)
     losses = result.validation_losses
     assert losses[0] > losses[1] > losses[2] < losses[3] < losses[4]
