@@ -98,9 +98,9 @@ CONFIGS: dict[str, BenchConfig] = {
     "demo": BenchConfig(
         name="demo", sim_profile="demo", n_scenes=8, sim_seed=0, labelled_fraction=0.25, window=3,
         width_scale=0.125,
-        pretrain=Schedule(lr=1e-3, batch_size=16, epochs=5, patience=2),
+        pretrain=Schedule(lr=1e-3, batch_size=16, epochs=4, patience=2),
         finetune=Schedule(lr=3e-4, batch_size=16, epochs=20, patience=3),
-        supervised=Schedule(lr=1e-3, batch_size=16, epochs=40, patience=3),
+        supervised=Schedule(lr=1e-3, batch_size=16, epochs=36, patience=3),
         seeds=3,
     ),
     "tiny": BenchConfig(
