@@ -3,9 +3,10 @@
 ``train`` fits a model that maps stacked range-Doppler maps ``[B, C, R, D]`` to per-cell logits
 ``[B, 1, R, D]`` with Adam and a binary cross-entropy on the cells whose mask is 0 (background) or 1
 (moving); uncertain cells (2) give no gradient. After every epoch it measures the same loss on
-validation data (when given; weighted by the validation masks' own class balance), keeps the checkpoint of the epoch with the lowest validation loss and
-that of the last epoch (older ones are removed), and may stop early. Called again with the same
-inputs, it resumes from the latest checkpoint of the run, reproducing an uninterrupted run exactly.
+validation data (when given; weighted by the validation masks' own class balance), keeps the
+checkpoint of the epoch with the lowest validation loss and that of the last epoch (older ones are
+removed), and may stop early. Called again with the same inputs, it resumes from the latest
+checkpoint of the run, reproducing an uninterrupted run exactly.
 
 Reproducibility: the sample order of epoch ``e`` is a permutation drawn from ``(seed, e)`` alone
 (``DistributedSampler``), and the torch / numpy / python generators are re-seeded at the start of
