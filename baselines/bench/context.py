@@ -75,11 +75,15 @@ class TrainingLabels:
         The ``autolabels`` step (automatic masks of every training scene under ``store/``).
     masks_dir : Path
         The ``label_masks`` step (manual-label masks of the labelled part under ``store/``).
+    validation_dir : Path
+        The ``validation_masks`` step (manual-label masks of the validation scenes under ``store/``),
+        which choose the checkpoints.
     """
 
     split: SemiSupervisedSplit
     auto_dir: Path
     masks_dir: Path
+    validation_dir: Path
 
 
 @dataclass(frozen=True)

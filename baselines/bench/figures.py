@@ -1,5 +1,6 @@
 """The pictures a researcher looks at first: precision-recall per band with every method on one
-plot, and a bird's-eye view of a test frame (SAR image, ground truth, each method's detections).
+plot, a bird's-eye view of a test frame (SAR image, ground truth, each method's detections), and the
+CNN rows' training curves (train and validation loss per epoch).
 
 matplotlib on the Agg canvas (no display needed); files are written atomically.
 """
@@ -78,6 +79,89 @@ def pr_comparison_figure(curves: list[tuple[str, MetricsRecord | Mapping[str, An
 def write_pr_comparisons(curves: list[tuple[str, MetricsRecord | Mapping[str, Any]]], out_dir: Path) -> list[Path]:
     """``out_dir/pr_<band>.png`` for every band (see :func:`pr_comparison_figure`)."""
     return [_save_png(pr_comparison_figure(curves, band), out_dir / f"pr_{band}.png") for band in BANDS_M]
+
+
+#: Colour of each training phase in the curves figure.
+PHASE_COLOURS = {"supervised": "C0", "pretrain": "C1", "fine-tune": "C2"}
+
+
+def _model_of(row_key: str) -> str:
+    # Row keys are "<model>-supervised" or "<model>-pretrained".
+    return row_key.rsplit("-", 1)[0]
+
+
+def loss_curves_figure(curves: list[Mapping[str, Any]]) -> Figure:
+    """Train (dashed) and validation (solid) loss per epoch, one panel per architecture.
+
+    A pretrained row's fine-tuning epochs follow its pretraining epochs on the same axis; a star marks
+    each phase's chosen epoch (the lowest validation loss). Every seed is drawn (thinner after the first).
+
+    Parameters
+    ----------
+    curves
+        ``curves.json`` documents (:func:`zendar_baselines.bench.steps.write_training_records`): ``row``,
+        ``seed`` and ``phases``, each phase with ``phase``, ``best_epoch`` and ``epochs`` of
+        ``{"epoch", "train", "validation"}`` (losses per labelled cell; None where not finite).
+
+    Raises
+    ------
+    ZendarError
+        When ``curves`` is empty.
+    """
+    models = list(dict.fromkeys(_model_of(record["row"]) for record in curves))
+    if not models:
+        raise ZendarError("loss_curves_figure: no training curves to draw")
+    figure = Figure(figsize=(4.0 * len(models) + 2.0, 4.2), dpi=100, layout="constrained")
+    FigureCanvasAgg(figure)
+    panels = figure.subplots(1, len(models), squeeze=False, sharey=True)[0]
+    legend: dict[str, Any] = {}
+    for axes, model in zip(panels, models):
+        records = sorted((r for r in curves if _model_of(r["row"]) == model), key=lambda r: (r["row"], r["seed"]))
+        first_seed = min(record["seed"] for record in records)
+        for record in records:
+            width, alpha = (1.6, 1.0) if record["seed"] == first_seed else (0.8, 0.45)
+            offset = 0
+            for phase in record["phases"]:
+                colour = PHASE_COLOURS.get(phase["phase"], "C3")
+                epochs = [offset + entry["epoch"] for entry in phase["epochs"]]
+                train = [np.nan if entry["train"] is None else entry["train"] for entry in phase["epochs"]]
+                validation = [np.nan if entry["validation"] is None else entry["validation"] for entry in phase["epochs"]]
+                line, = axes.plot(epochs, train, linestyle="--", color=colour, linewidth=width, alpha=alpha)
+                legend.setdefault(f"{phase['phase']}, train", line)
+                line, = axes.plot(epochs, validation, linestyle="-", color=colour, linewidth=width, alpha=alpha)
+                legend.setdefault(f"{phase['phase']}, validation", line)
+                best = phase["best_epoch"]
+                if 1 <= best <= len(validation):
+                    star, = axes.plot([offset + best], [validation[best - 1]], marker="*", markersize=10, color=colour,
+                                      linestyle="none", alpha=alpha)
+                    legend.setdefault("epoch chosen", star)
+                offset = epochs[-1] if epochs else offset
+        axes.set_title(model, fontsize=10)
+        axes.set_xlabel("epoch (fine-tuning after pretraining)")
+        axes.set_yscale("log")
+        axes.grid(alpha=0.3, which="both")
+    panels[0].set_ylabel("masked BCE per labelled cell")
+    figure.legend(list(legend.values()), list(legend), loc="outside right center", frameon=False, fontsize=8)
+    return figure
+
+
+def write_loss_curves(path: Path, row_dirs: list[Path]) -> Path | None:
+    """``path`` (PNG): :func:`loss_curves_figure` of every ``<row_dir>/seed-*/curves.json``; None without rows.
+
+    Raises
+    ------
+    ZendarError
+        When a row directory holds no seed's curves.
+    """
+    curves = []
+    for row_dir in row_dirs:
+        files = sorted(row_dir.glob("seed-*/curves.json"))
+        if not files:
+            raise ZendarError(f"{row_dir}: no seed-*/curves.json to draw")
+        curves.extend(read_json(file) for file in files)
+    if not curves:
+        return None
+    return _save_png(loss_curves_figure(curves), path)
 
 
 def _box_corners(car: dict[str, float]) -> np.ndarray:

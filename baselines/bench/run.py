@@ -6,14 +6,16 @@ The steps, each cached in the run directory under a key of its inputs (:mod:`run
 2. the semi-supervised split of the training scenes (``split.json``, checksummed);
 3. automatic labels of every training scene (a side store beside, never inside, the dataset) and
    their precision and recall against the manual labels, per band;
-4. the manual-label masks of the labelled part only;
+4. the manual-label masks of the labelled part only, and of the validation scenes (they choose
+   every training phase's checkpoint);
 5. the detection chain's constants fitted on CFAR peaks of the labelled part, checked on the
    validation split (``chain_fit/cfar``, :mod:`chain_step`), and the CFAR baseline with them on the
    test split;
 6. per architecture and seed: supervised-only training, pretraining on automatic labels then
    fine-tuning; the chain's constants fitted on the model's own peaks as for CFAR; each scored on
    the test split;
-7. ``results.json``, ``table.md``, ``table.csv``, precision-recall plots and a bird's-eye figure.
+7. ``results.json``, ``table.md``, ``table.csv``, precision-recall plots, a bird's-eye figure and the
+   training curves (``curves.png``).
 """
 
 from __future__ import annotations
@@ -135,7 +137,9 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
     masks_dir, masks_key, _ = run.step("label_masks", {**base_inputs, "split": split_key},
                                        lambda d: steps.write_label_masks(context, split, d))
-    labels = TrainingLabels(split, auto_dir, masks_dir)
+    validation_dir, validation_key, _ = run.step("validation_masks", base_inputs,
+                                                 lambda d: steps.write_validation_masks(context, d))
+    labels = TrainingLabels(split, auto_dir, masks_dir, validation_dir)
 
     cfar_chain, cfar_fit, chain_key = chain_step.cfar_chain_step(run, context, split, split_key)
 
@@ -152,7 +156,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                 for seed in range(options.seeds):
                     row_seed = RowSeed(model_name, pretrained, seed)
                     inputs = {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
-                              "model": model_name, "pretrained": pretrained, "seed": seed}
+                              "validation_masks": validation_key, "model": model_name, "pretrained": pretrained, "seed": seed}
                     seed_dir, _, _ = run.step(
                         f"rows/{key}/seed-{seed}", inputs,
                         lambda d, r=row_seed: _train_and_score(context, labels, r, d, test_scenes),
@@ -185,7 +189,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
     from zendar_baselines.bench.chain_step import CFAR_STEP, chain_fit_record
     from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
-    from zendar_baselines.bench.figures import write_bev_figure, write_pr_comparisons
+    from zendar_baselines.bench.figures import write_bev_figure, write_loss_curves, write_pr_comparisons
 
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
@@ -221,6 +225,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     write_json_atomic(out / "autolabel_quality.json", quality["quality"])
     curves = [(_label(row), row.seed_metrics[0]) for row in rows]
     write_pr_comparisons(curves, out)
+    write_loss_curves(out / "curves.png", [out / "rows" / row.key for row in rows if row.supervised])
     write_bev_figure(out / "bev.png", context.dataset,
                      {_label(row): out / "rows" / row.key / "predictions.json" for row in rows})
     say(table)

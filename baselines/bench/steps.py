@@ -11,9 +11,11 @@ puts the trained models to the test split).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
+import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tqdm import tqdm
@@ -34,11 +36,20 @@ from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
 from zendar_baselines.labels.splits import SemiSupervisedSplit, make_split, read_split, write_split
 
+if TYPE_CHECKING:
+    from torch.utils.data import ConcatDataset
+
+    from zendar_baselines.cnn.training import TrainResult
+
 SPLIT_FILE = "split.json"
 STORE_DIR = "store"
 CHECKPOINT_RECORD = "checkpoint.json"
 # The manual-label masks the automatic labels' quality is measured against (write_auto_labels).
 QUALITY_REFERENCE = MaskParams(manual_targets="cfar-peaks")
+CURVES_FILE = "curves.json"
+#: Without validation scenes: the share of each labelled scene's frames (its last ones) held out to
+#: choose the checkpoint.
+HOLD_OUT_FRACTION = 0.2
 
 
 def mask_parameters(params: MaskParams | None = None) -> dict[str, Any]:
@@ -117,9 +128,32 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
 def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path) -> None:
     """Manual-label masks of the labelled part of the training scenes only (a store of the same format)."""
     split.check_manual_label_use(split.labelled)
+    _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks")
+
+
+def write_validation_masks(run: RunContext, step_dir: Path) -> None:
+    """Manual-label masks of the validation scenes (a store as :func:`write_label_masks`'s; empty without any).
+
+    They choose each training phase's checkpoint (the epoch of least validation loss) and feed no
+    gradient. The test split's labels are never read here.
+
+    Raises
+    ------
+    ZendarError
+        When a scene is in both the validation and the test split.
+    """
+    scene_ids = run.dataset.scene_ids("val")
+    shared = sorted(set(scene_ids) & set(run.dataset.scene_ids("test")))
+    if shared:
+        raise ZendarError(f"{run.root}: scenes {shared} are in both the val and the test split; the test split "
+                          "may not choose checkpoints")
+    _write_manual_label_masks(run, scene_ids, step_dir, "validation masks")
+
+
+def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: Path, description: str) -> None:
     parameters = {**mask_parameters(), "kind": "labels"}
     store = MaskStore.create(step_dir / STORE_DIR, run.dataset, parameters, code_version=run.code_version)
-    for scene_id in tqdm(split.labelled, desc="manual-label masks", unit="scene"):
+    for scene_id in tqdm(scene_ids, desc=description, unit="scene"):
         if store.has_scene(scene_id, parameters, run.code_version):
             continue
         with run.dataset.open_scene(scene_id) as reader:
@@ -179,11 +213,14 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path):
 
 
 def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path) -> Path:
-    """Train one seed of one Table 1 row; returns the final checkpoint (recorded in ``checkpoint.json``).
+    """Train one seed of one Table 1 row; returns the checkpoint chosen (recorded in ``checkpoint.json``).
 
     Supervised-only: the labelled part's manual masks with ``config.supervised``. Pretrained:
     every training scene's automatic masks with ``config.pretrain``, then the labelled part's
-    manual masks with ``config.finetune`` starting from those weights.
+    manual masks with ``config.finetune`` starting from the pretraining epoch chosen. Every phase
+    keeps the epoch of least loss on the validation masks (:func:`validation_frames`).
+    ``checkpoint.json`` records every phase's losses per epoch, the epoch chosen and the validation
+    data; ``curves.json`` the train and validation loss per epoch and phase.
     """
     from zendar_baselines.cnn.models import build_model, parameter_count
     from zendar_baselines.cnn.training import seed_everything, train
@@ -192,26 +229,114 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
     split.check_manual_label_use(split.labelled)
     labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR)
     in_channels = labelled.datasets[0].in_channels
+    labelled, validation, validation_record = validation_frames(run, labels, labelled)
 
     def fresh_model():
         seed_everything(row.seed)
         return build_model(row.model_name, in_channels, config.width_scale).to(run.device)
 
+    results = {}
     init_from = None
     if row.pretrained:
         everything = _frames(run, sorted((*split.labelled, *split.unlabelled)), labels.auto_dir / STORE_DIR)
         model = fresh_model()
-        result = train(model, everything, config.pretrain, seed=row.seed, out_dir=out_dir / "pretrain", device=run.device,
-                       description=f"{row.model_name} pretrain seed {row.seed} ({parameter_count(model):,} parameters)")
-        init_from = result.checkpoint_path
+        results["pretrain"] = train(
+            model, everything, config.pretrain, seed=row.seed, out_dir=out_dir / "pretrain", device=run.device,
+            validation=validation,
+            description=f"{row.model_name} pretrain seed {row.seed} ({parameter_count(model):,} parameters)")
+        init_from = results["pretrain"].checkpoint_path
     model = fresh_model()
     schedule = config.finetune if row.pretrained else config.supervised
     phase = "fine-tune" if row.pretrained else "supervised"
-    result = train(model, labelled, schedule, seed=row.seed, out_dir=out_dir / phase, device=run.device, init_from=init_from,
-                   description=f"{row.model_name} {phase} seed {row.seed} ({parameter_count(model):,} parameters)")
-    write_json_atomic(out_dir / CHECKPOINT_RECORD, {"checkpoint": str(result.checkpoint_path.relative_to(out_dir)),
-                                                    "epoch_losses": list(result.epoch_losses)})
-    return result.checkpoint_path
+    results[phase] = train(
+        model, labelled, schedule, seed=row.seed, out_dir=out_dir / phase, device=run.device, init_from=init_from,
+        validation=validation,
+        description=f"{row.model_name} {phase} seed {row.seed} ({parameter_count(model):,} parameters)")
+    write_training_records(out_dir, row, results, validation_record)
+    return results[phase].checkpoint_path
+
+
+def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatDataset
+                      ) -> tuple[ConcatDataset, ConcatDataset, dict[str, Any]]:
+    """The samples that choose the checkpoints, and the labelled samples left to train on.
+
+    The validation scenes' manual-label masks (``labels.validation_dir``) when the dataset has
+    validation scenes. Otherwise the last :data:`HOLD_OUT_FRACTION` of every labelled scene's and
+    radar's samples, ``K - 1`` samples apart from the rest (so no map is in both), are held out of
+    the manual-label training data, with a warning on stderr. Either way every K-th window is kept
+    (windows that share no map).
+
+    Returns
+    -------
+    labelled : ConcatDataset
+        The labelled samples to train on.
+    validation : ConcatDataset
+    record : dict
+        ``source`` (``"val split"`` or ``"held-out labelled training frames"``), ``scenes``,
+        ``window_stride`` (K), ``n_samples``, and ``fraction`` for held-out frames.
+    """
+    from zendar_baselines.cnn.training import hold_out_tail
+
+    window = run.config.window
+    scene_ids = run.dataset.scene_ids("val")
+    if scene_ids:
+        validation = _every_kth(_frames(run, scene_ids, labels.validation_dir / STORE_DIR), window)
+        return labelled, validation, {"source": "val split", "scenes": scene_ids, "window_stride": window,
+                                      "n_samples": len(validation)}
+    labelled, held_out = hold_out_tail(labelled, HOLD_OUT_FRACTION, gap=window - 1)
+    validation = _every_kth(held_out, window)
+    print(f"warning: {run.root} has no validation scenes; the last {HOLD_OUT_FRACTION:.0%} of every labelled "
+          "training scene's frames are held out of training to choose the checkpoints", file=sys.stderr, flush=True)
+    return labelled, validation, {"source": "held-out labelled training frames", "scenes": list(labels.split.labelled),
+                                  "fraction": HOLD_OUT_FRACTION, "window_stride": window, "n_samples": len(validation)}
+
+
+def _every_kth(data: ConcatDataset, k: int) -> ConcatDataset:
+    # Windows k apart share no map: the validation loss costs 1/k of every window's and loses
+    # little, as neighbouring windows hold K - 1 of the same maps.
+    from torch.utils.data import ConcatDataset, Subset
+
+    return ConcatDataset([Subset(part, range(0, len(part), k)) for part in data.datasets])
+
+
+def _finite(values) -> list[float | None]:
+    # A diverged epoch's NaN or infinite loss is recorded as null (strict JSON).
+    return [float(v) if math.isfinite(v) else None for v in values]
+
+
+def write_training_records(out_dir: Path, row: RowSeed, results: dict[str, TrainResult], validation: dict[str, Any]) -> None:
+    """``checkpoint.json`` and ``curves.json`` of one row's seed from its phases' ``TrainResult`` s (in order).
+
+    ``checkpoint.json``: ``checkpoint`` (the last phase's chosen checkpoint, relative to ``out_dir``),
+    ``epoch_losses`` (the last phase's training losses), ``validation`` and per phase ``checkpoint``,
+    ``last_checkpoint``, ``best_epoch``, ``epochs_run``, ``stopped_early``, ``train_losses`` and
+    ``validation_losses``. ``curves.json``: per phase, one ``{"epoch", "train", "validation"}`` entry
+    per epoch run and the ``best_epoch``.
+    """
+    phases = {
+        name: {
+            "checkpoint": str(result.checkpoint_path.relative_to(out_dir)),
+            "last_checkpoint": str(result.last_checkpoint_path.relative_to(out_dir)),
+            "best_epoch": result.best_epoch,
+            "epochs_run": len(result.epoch_losses),
+            "stopped_early": result.stopped_early,
+            "train_losses": _finite(result.epoch_losses),
+            "validation_losses": _finite(result.validation_losses),
+        }
+        for name, result in results.items()
+    }
+    final = list(phases.values())[-1]
+    write_json_atomic(out_dir / CHECKPOINT_RECORD, {"checkpoint": final["checkpoint"], "epoch_losses": final["train_losses"],
+                                                    "validation": validation, "phases": phases})
+    curves = [
+        {"phase": name, "best_epoch": phase["best_epoch"],
+         "epochs": [{"epoch": epoch, "train": train_loss,
+                     "validation": phase["validation_losses"][epoch - 1] if epoch <= len(phase["validation_losses"]) else None}
+                    for epoch, train_loss in enumerate(phase["train_losses"], 1)]}
+        for name, phase in phases.items()
+    ]
+    write_json_atomic(out_dir / CURVES_FILE, {"format": "zendar-bench-curves", "format_version": 1, "row": row.row_key,
+                                              "seed": row.seed, "validation": validation["source"], "phases": curves})
 
 
 def final_checkpoint(seed_dir: Path) -> Path:

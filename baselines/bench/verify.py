@@ -1,11 +1,14 @@
 """``zendar-bench verify``: re-score a finished run from its checkpoints.
 
 Every CNN row's checkpoints are loaded (their SHA-256 manifest and architecture checked), the test
-split is predicted again, with the chain's constants the run fitted for the row (its
-``chain_fit.json``), and scored by the official evaluator; the CFAR row is recomputed from the
-cubes. A row reproduces when every band's AP is within :data:`AP_TOLERANCE` of what the run recorded.
-Inference is deterministic on one machine; the tolerance allows for another CPU's or a GPU's float
-rounding moving a few cells across the mask threshold.
+split is predicted again and scored by the official evaluator; the CFAR row is recomputed from the
+cubes. A row reproduces when every band's AP is within its tolerance of what the run recorded:
+:data:`CFAR_AP_TOLERANCE` for the CFAR row, which reproduces exactly on every machine tried, and
+:data:`CNN_AP_TOLERANCE` for the CNN rows, the spread measured between machines of another vector
+width: the same ``zendar-bench`` on an AVX2 and an AVX-512 CPU gave CNN rows up to 1.3 AP points
+apart (the CFAR row identical), because oneDNN's convolutions and ATen's vectorised reductions sum
+in another order on each, and training compounds the rounding over thousands of steps. On one
+machine verifying a run is exact.
 
 The claims' paired intervals are recomputed from the run's recorded first-seed predictions (the same
 resamples, so the same numbers): each comparison's verdict must be the recorded one. A results file
@@ -30,9 +33,17 @@ from zendar_baselines.bench.run_directory import RUN_MARKER, read_json
 if TYPE_CHECKING:
     from zendar_baselines.bench.scoring import ScoringScenes
 
-#: Largest |AP difference| per band (fraction) for a row to count as reproduced.
-AP_TOLERANCE = 0.01
+#: Largest |AP difference| per band (fraction) for the CFAR row to count as reproduced.
+CFAR_AP_TOLERANCE = 0.01
+#: Largest |AP difference| per band (fraction) for a CNN row: the cross-machine spread measured
+#: (0.013, AVX2 against AVX-512), rounded up.
+CNN_AP_TOLERANCE = 0.015
 BANDS = BAND_NAMES
+
+
+def ap_tolerance(row_key: str) -> float:
+    """Largest |AP difference| per band for a row to count as reproduced: CFAR's or the CNN rows'."""
+    return CFAR_AP_TOLERANCE if row_key == "cfar" else CNN_AP_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -70,7 +81,8 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
         rows = results["rows"]
     except (KeyError, TypeError) as exc:
         raise ZendarError(f"{out / 'results.json'}: not a zendar-bench results file ({exc!r} missing)") from None
-    lines = [f"re-scoring {out} (tolerance {AP_TOLERANCE:g} AP per band)"]
+    lines = [f"re-scoring {out} (tolerance per band: {CFAR_AP_TOLERANCE:g} AP for CFAR, {CNN_AP_TOLERANCE:g} for the "
+             "CNN rows, their spread across CPUs)"]
     all_reproduced = True
     with ScoringScenes(root) as test_scenes:
         for row in rows:
@@ -133,7 +145,7 @@ def _verify_row(out: Path, row: dict, root: Path, config: BenchConfig, device: s
         worst = max((abs(again[b] - recorded[b]) for b in BANDS if again[b] is not None and recorded[b] is not None),
                     default=0.0)
         same_bands = all((again[b] is None) == (recorded[b] is None) for b in BANDS)
-        ok = same_bands and worst <= AP_TOLERANCE and not math.isnan(worst)
+        ok = same_bands and worst <= ap_tolerance(key) and not math.isnan(worst)
         all_reproduced &= ok
         shown = " ".join(f"{b} {format_percent(recorded[b])}->{format_percent(again[b])}" for b in BANDS)
         lines.append(f"  {'ok  ' if ok else 'DIFF'} {seed_dir.relative_to(out)}: {shown} (max |diff| {worst:.4f})")

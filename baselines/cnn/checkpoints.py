@@ -185,6 +185,19 @@ def save_checkpoint(
     return sha256
 
 
+def remove_checkpoint(path: str | os.PathLike) -> None:
+    """Delete a checkpoint: first its manifest entry (atomically), then the file; absent ones are fine.
+
+    In this order an interruption leaves at worst a file the manifest no longer vouches for, which
+    :func:`load_checkpoint` refuses, never a manifest entry whose file is half deleted.
+    """
+    path = Path(path)
+    manifest = read_manifest(path.parent)
+    if manifest.pop(path.name, None) is not None:
+        write_text_atomic(path.parent / MANIFEST_NAME, json_text(manifest, indent=2, sort_keys=True))
+    path.unlink(missing_ok=True)
+
+
 def _architecture_text(architecture: Any) -> str:
     return json.dumps(architecture, sort_keys=True, default=str)
 
@@ -303,6 +316,7 @@ __all__ = [
     "load_model_state",
     "model_architecture",
     "read_manifest",
+    "remove_checkpoint",
     "save_checkpoint",
     "unwrap_model",
 ]

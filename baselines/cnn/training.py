@@ -2,13 +2,18 @@
 
 ``train`` fits a model that maps stacked range-Doppler maps ``[B, C, R, D]`` to per-cell logits
 ``[B, 1, R, D]`` with Adam and a binary cross-entropy on the cells whose mask is 0 (background) or 1
-(moving); uncertain cells (2) give no gradient. It checkpoints after every epoch and, called again
-with the same inputs, resumes from the latest checkpoint of the run, reproducing the weights of an
-uninterrupted run exactly.
+(moving); uncertain cells (2) give no gradient. After every epoch it measures the same loss on
+validation data (when given; weighted by the validation masks' own class balance), keeps the
+checkpoint of the epoch with the lowest validation loss and that of the last epoch (older ones are
+removed), and may stop early. Called again with the same inputs, it resumes from the latest
+checkpoint of the run, reproducing an uninterrupted run exactly.
 
 Reproducibility: the sample order of epoch ``e`` is a permutation drawn from ``(seed, e)`` alone
 (``DistributedSampler``), and the torch / numpy / python generators are re-seeded at the start of
-every epoch from ``(seed, e, rank)``; nothing depends on how many epochs ran in this process.
+every epoch from ``(seed, e, rank)``; nothing depends on how many epochs ran in this process. While
+training, torch runs its deterministic algorithms where it has them and a fixed number of intra-op
+threads (:data:`TRAINING_THREADS`), so the reductions' summation order does not follow the machine's
+core count.
 
 Multi-process: under ``torchrun`` (``WORLD_SIZE`` > 1) each process takes ``batch_size / WORLD_SIZE``
 samples of every global batch, and the loss is normalised by the global count of labelled cells, so
@@ -26,7 +31,7 @@ import random
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +40,7 @@ import torch
 import torch.distributed as dist
 import torch.nn.functional as F
 from torch import nn
-from torch.utils.data import ConcatDataset, DataLoader, Dataset
+from torch.utils.data import ConcatDataset, DataLoader, Dataset, Subset
 from torch.utils.data.distributed import DistributedSampler
 from tqdm.auto import tqdm
 
@@ -46,6 +51,7 @@ from zendar_baselines.cnn.checkpoints import (
     load_checkpoint,
     load_model_state,
     model_architecture,
+    remove_checkpoint,
     save_checkpoint,
     unwrap_model,
 )
@@ -55,6 +61,16 @@ from zendar_baselines.cnn.mask_frames import MaskFrames
 from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 
 MAX_POS_WEIGHT = 100.0
+#: Intra-op threads while training, whatever the machine's core count: a convolution's weight
+#: gradient sums over the batch in per-thread partial sums, whose number (and so the rounding)
+#: follows the thread count (1 and 2 threads give other weights after 3 steps).
+TRAINING_THREADS = 2
+#: The widest vector instructions oneDNN's convolutions may use. oneDNN picks its kernels, and with
+#: them the summation order, by the CPU's vector width: unpinned, an AVX-512 and an AVX2 CPU train to
+#: other weights. AVX2 runs on both. oneDNN reads it once, at the process's first convolution, so it
+#: is set (unless the environment sets it) when this module is imported, before any model runs.
+ONEDNN_MAX_CPU_ISA = "AVX2"
+os.environ.setdefault("ONEDNN_MAX_CPU_ISA", ONEDNN_MAX_CPU_ISA)
 _CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")
 
 
@@ -65,9 +81,18 @@ class TrainResult:
     Attributes
     ----------
     checkpoint_path : Path
-        The checkpoint of the last epoch (``out_dir/epoch-NNNN.pt``).
+        The checkpoint of the epoch chosen: the lowest validation loss, or the last epoch without
+        validation data (``out_dir/epoch-NNNN.pt``).
+    last_checkpoint_path : Path
+        The checkpoint of the last epoch run.
+    best_epoch : int
+        The epoch chosen (1-based).
     epoch_losses : tuple of float
-        Mean loss per labelled cell of every epoch 1 .. ``schedule.epochs`` (resumed epochs included).
+        Mean training loss per labelled cell of every epoch run (resumed epochs included).
+    validation_losses : tuple of float
+        Mean validation loss per labelled cell after every epoch run; empty without validation data.
+    stopped_early : bool
+        Training ended before ``schedule.epochs`` because the validation loss stopped falling.
     resumed_from_epoch : int
         Epochs read back from an earlier call (0: trained from the start).
     pos_weight : float
@@ -75,7 +100,11 @@ class TrainResult:
     """
 
     checkpoint_path: Path
+    last_checkpoint_path: Path
+    best_epoch: int
     epoch_losses: tuple[float, ...]
+    validation_losses: tuple[float, ...]
+    stopped_early: bool
     resumed_from_epoch: int
     pos_weight: float
 
@@ -146,11 +175,71 @@ def positive_class_weight(data: Dataset) -> float:
     return float(min(max(math.sqrt(background / moving), 1.0), MAX_POS_WEIGHT))
 
 
+def hold_out_tail(data: ConcatDataset, fraction: float, gap: int) -> tuple[ConcatDataset, ConcatDataset]:
+    """Split every part of ``data`` (one scene and radar each) in time: its last samples are held out.
+
+    Parameters
+    ----------
+    data : ConcatDataset
+        Parts of consecutive samples, e.g. one ``MaskFrames`` per scene and radar.
+    fraction : float
+        In (0, 1): the share of each part's samples held out, rounded up (at least one).
+    gap : int
+        Samples dropped between the kept and the held-out ones of a part: ``K - 1`` for windows of
+        K maps, so that no map is in both (neighbouring frames are near copies of each other).
+
+    Returns
+    -------
+    kept, held_out : ConcatDataset
+        ``Subset`` s of the parts, in order; deterministic (no random draw).
+
+    Raises
+    ------
+    ZendarError
+        When a part is too short to keep a sample after holding out its tail and the gap.
+    """
+    if not 0.0 < fraction < 1.0:
+        raise ZendarError(f"hold_out_tail: fraction must be in (0, 1), found {fraction!r}")
+    kept, held_out = [], []
+    for index, part in enumerate(data.datasets):
+        n = len(part)
+        n_held = max(1, math.ceil(fraction * n))
+        n_kept = n - n_held - gap
+        if n_kept < 1:
+            raise ZendarError(
+                f"hold_out_tail: part {index} has {n} samples, too few to hold out {n_held} of them "
+                f"after a gap of {gap} and keep one for training"
+            )
+        kept.append(Subset(part, range(n_kept)))
+        held_out.append(Subset(part, range(n - n_held, n)))
+    return ConcatDataset(kept), ConcatDataset(held_out)
+
+
 def seed_everything(seed: int) -> None:
     """Seed python's ``random``, numpy's global generator and torch (CPU and every CUDA device)."""
     random.seed(seed)
     np.random.seed(seed % 2**32)
     torch.manual_seed(seed)
+
+
+@contextmanager
+def deterministic_torch(threads: int | None = None) -> Iterator[None]:
+    """Within the block: torch's deterministic algorithms (a warning where an op has none) and ``threads``
+    intra-op threads (default :data:`TRAINING_THREADS`); the previous settings come back afterwards.
+
+    On CUDA, cuBLAS needs ``CUBLAS_WORKSPACE_CONFIG`` for deterministic matrix products; it is set
+    (``:4096:8``) unless the environment already sets it.
+    """
+    previous = (torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled(),
+                torch.get_num_threads())
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    torch.set_num_threads(TRAINING_THREADS if threads is None else threads)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(previous[0], warn_only=previous[1])
+        torch.set_num_threads(previous[2])
 
 
 def _epoch_seed(seed: int, epoch: int, rank: int) -> int:
@@ -215,14 +304,18 @@ def checkpoint_path(out_dir: str | os.PathLike, epoch: int) -> Path:
     return Path(out_dir) / f"epoch-{epoch:04d}.pt"
 
 
-def _run_identity(model: nn.Module, schedule: Schedule, seed: int, n_samples: int, initial_sha256: str) -> dict[str, Any]:
-    # Everything that decides the weights after epoch e, except the number of epochs still to run.
+def _run_identity(model: nn.Module, schedule: Schedule, seed: int, n_samples: int, n_validation_samples: int,
+                  initial_sha256: str) -> dict[str, Any]:
+    # Everything that decides the weights after epoch e and the epoch chosen, except the number of
+    # epochs still to run.
     return {
         "architecture": model_architecture(model),
         "lr": float(schedule.lr),
         "batch_size": int(schedule.batch_size),
+        "patience": schedule.patience,
         "seed": int(seed),
         "n_samples": int(n_samples),
+        "n_validation_samples": int(n_validation_samples),
         "initial_weights_sha256": initial_sha256,
         "code_version": code_version(),
     }
@@ -230,13 +323,7 @@ def _run_identity(model: nn.Module, schedule: Schedule, seed: int, n_samples: in
 
 def _find_resume_point(out_dir: Path, identity: dict[str, Any], epochs: int) -> tuple[int, dict[str, Any] | None]:
     """The latest usable checkpoint of this run with at most ``epochs`` epochs: (epoch, checkpoint)."""
-    found = []
-    if out_dir.is_dir():
-        for entry in out_dir.iterdir():
-            match = _CHECKPOINT_NAME.match(entry.name)
-            if match:
-                found.append(int(match[1]))
-    for epoch in sorted(found, reverse=True):
+    for epoch in sorted(_checkpoint_epochs(out_dir), reverse=True):
         path = checkpoint_path(out_dir, epoch)
         try:
             checkpoint = load_checkpoint(path)
@@ -256,13 +343,30 @@ def _find_resume_point(out_dir: Path, identity: dict[str, Any], epochs: int) -> 
     return 0, None
 
 
-def _check_schedule(schedule: Schedule, world_size: int) -> None:
+def _checkpoint_epochs(out_dir: Path) -> list[int]:
+    """Epochs of the ``epoch-NNNN.pt`` files in ``out_dir``."""
+    if not out_dir.is_dir():
+        return []
+    return [int(match[1]) for entry in out_dir.iterdir() if (match := _CHECKPOINT_NAME.match(entry.name))]
+
+
+def _remove_checkpoints_but(out_dir: Path, keep: set[int]) -> None:
+    for epoch in _checkpoint_epochs(out_dir):
+        if epoch not in keep:
+            remove_checkpoint(checkpoint_path(out_dir, epoch))
+
+
+def _check_schedule(schedule: Schedule, world_size: int, validating: bool) -> None:
     if not (isinstance(schedule.epochs, int) and schedule.epochs >= 1):
         raise ZendarError(f"schedule.epochs must be a positive integer, found {schedule.epochs!r}")
     if not (isinstance(schedule.batch_size, int) and schedule.batch_size >= 1):
         raise ZendarError(f"schedule.batch_size must be a positive integer, found {schedule.batch_size!r}")
     if not (math.isfinite(schedule.lr) and schedule.lr >= 0):
         raise ZendarError(f"schedule.lr must be a finite number >= 0, found {schedule.lr!r}")
+    if schedule.patience is not None and not (isinstance(schedule.patience, int) and schedule.patience >= 1):
+        raise ZendarError(f"schedule.patience must be None or a positive integer, found {schedule.patience!r}")
+    if schedule.patience is not None and not validating:
+        raise ZendarError(f"schedule.patience {schedule.patience} stops on the validation loss: give validation data")
     if schedule.batch_size % world_size:
         raise ZendarError(
             f"schedule.batch_size {schedule.batch_size} (the global batch) is not divisible by the "
@@ -279,35 +383,45 @@ def train(
     out_dir: str | os.PathLike,
     device: str | torch.device = "cpu",
     init_from: str | os.PathLike | None = None,
+    validation: Dataset | None = None,
     progress: bool = True,
     description: str = "",
     num_workers: int = 0,
 ) -> TrainResult:
-    """Train ``model`` in place on ``data``: Adam, masked BCE, a checkpoint per epoch, resumable.
+    """Train ``model`` in place on ``data``: Adam, masked BCE, the epoch of least validation loss kept, resumable.
 
     Parameters
     ----------
     model : nn.Module
         Freshly built (its initial weights are part of the run's identity, so build it after
         ``seed_everything(seed)`` for a reproducible run); maps float32 ``[B, C, R, D]`` to logits
-        ``[B, 1, R, D]`` and carries ``model.architecture``. Holds the final weights on return.
+        ``[B, 1, R, D]`` and carries ``model.architecture``. Holds the weights of the last epoch run
+        on return (those of the chosen epoch are in ``checkpoint_path``).
     data : Dataset
         Samples ``(input float32 [C, R, D], mask uint8 [R, D])``, e.g. ``MaskFrames`` or a
         ``ConcatDataset`` of them.
     schedule : Schedule
-        Learning rate, global batch size (split evenly over processes) and total epochs.
+        Learning rate, global batch size (split evenly over processes), epochs at most and the
+        early-stopping patience.
     seed : int
         Decides the sample order and every random draw during training.
     out_dir : path
-        Checkpoints ``epoch-NNNN.pt`` and ``manifest.json``; one run per directory. When it
-        already holds checkpoints of this run (same architecture, initial weights, lr, batch
-        size, seed, sample count and code version), training resumes after the latest one with at
-        most ``schedule.epochs`` epochs (and returns at once when that is the last).
+        Checkpoints ``epoch-NNNN.pt`` and ``manifest.json``; one run per directory. Only the
+        checkpoints of the best epoch so far and of the last epoch stay. When it already holds
+        checkpoints of this run (same architecture, initial weights, lr, batch size, patience, seed,
+        sample counts and code version), training resumes after the latest one with at most
+        ``schedule.epochs`` epochs (and returns at once when the run had finished).
     device : str or torch.device
         ``"cpu"`` or ``"cuda"`` (under torchrun each process takes ``cuda:LOCAL_RANK``).
     init_from : path, optional
         A checkpoint whose weights (same architecture) replace the model's before training
         (pretraining → fine-tuning); the optimizer starts fresh.
+    validation : Dataset, optional
+        Samples as ``data``'s; after every epoch the model (in eval mode) is scored on them with the
+        training loss, its positive weight counted on the validation masks (so that the losses of
+        phases and rows scored on the same masks compare), and the epoch of the lowest score is
+        chosen (the earliest of equal ones). None: the last epoch is chosen and
+        ``schedule.patience`` must be None.
     progress : bool
         Show a tqdm bar with the epoch and running loss (rank 0 only).
     description : str
@@ -322,14 +436,17 @@ def train(
     Raises
     ------
     ZendarError
-        For an invalid schedule or empty data, a model output of the wrong shape, ``out_dir``
-        holding another run, or an unusable ``init_from`` checkpoint (CheckpointError).
+        For an invalid schedule, empty data, validation data without a labelled cell, a model output
+        of the wrong shape, ``out_dir`` holding another run, or an unusable ``init_from`` checkpoint
+        (CheckpointError).
     """
     out_dir = Path(out_dir)
-    with _process_group(device) as process:
-        _check_schedule(schedule, process.world_size)
+    with _process_group(device) as process, deterministic_torch():
+        _check_schedule(schedule, process.world_size, validation is not None)
         if len(data) == 0:
             raise ZendarError("train: the dataset has no samples")
+        if validation is not None and len(validation) == 0:
+            raise ZendarError("train: the validation dataset has no samples")
         if process.device.type == "cuda":
             torch.backends.cudnn.benchmark = False
             torch.backends.cudnn.deterministic = True
@@ -343,7 +460,8 @@ def train(
             # The wrapper broadcasts rank 0's weights, so every rank starts from the same ones.
             device_ids = [process.device.index] if process.device.type == "cuda" else None
             trained = nn.parallel.DistributedDataParallel(model, device_ids=device_ids)
-        identity = _run_identity(model, schedule, seed, len(data), state_sha256(model))
+        n_validation = 0 if validation is None else len(validation)
+        identity = _run_identity(model, schedule, seed, len(data), n_validation, state_sha256(model))
         start_epoch, resumed, failure = 0, None, None
         if process.is_main:
             try:
@@ -357,16 +475,18 @@ def train(
             raise failure
 
         optimizer = torch.optim.Adam(trained.parameters(), lr=schedule.lr)
-        losses: list[float] = []
+        history = _History()
         if start_epoch > 0:
             resume_path = checkpoint_path(out_dir, start_epoch)
             checkpoint = resumed if process.is_main else load_checkpoint(resume_path, identity["architecture"])
             load_model_state(model, checkpoint, resume_path)
             optimizer.load_state_dict(checkpoint["optimizer_state"])
-            losses = [float(v) for v in checkpoint["losses"][:start_epoch]]
+            history = _History.from_checkpoint(checkpoint, start_epoch)
             pos_weight = float(checkpoint["pos_weight"])
         else:
             pos_weight = positive_class_weight(data)
+        # The validation masks' own weight: validation losses then compare across phases and rows.
+        validation_pos_weight = None if validation is None else positive_class_weight(validation)
 
         sampler = DistributedSampler(
             data, num_replicas=process.world_size, rank=process.rank, shuffle=True, seed=seed, drop_last=False
@@ -379,9 +499,17 @@ def train(
             generator=torch.Generator().manual_seed(seed),
             pin_memory=process.device.type == "cuda",
         )
+        validation_loader = None
+        if validation is not None:
+            # Every process scores its own share (every world_size-th sample); the sums are all-reduced.
+            validation_loader = DataLoader(
+                Subset(validation, range(process.rank, len(validation), process.world_size)),
+                batch_size=schedule.batch_size // process.world_size, shuffle=False, num_workers=num_workers,
+                pin_memory=process.device.type == "cuda",
+            )
         config = {"schedule": asdict(schedule), "seed": int(seed), "world_size": process.world_size,
                   "init_from": init_record, "description": description}
-        remaining = schedule.epochs - start_epoch
+        remaining = 0 if history.finished(schedule) else schedule.epochs - start_epoch
         bar = tqdm(
             total=remaining * len(loader),
             desc=description or "train",
@@ -391,31 +519,106 @@ def train(
         )
         with bar:
             for epoch in range(start_epoch + 1, schedule.epochs + 1):
+                if history.finished(schedule):
+                    break
                 sampler.set_epoch(epoch)
                 epoch_seed = _epoch_seed(seed, epoch, process.rank)
                 seed_everything(epoch_seed)
                 loader.generator.manual_seed(epoch_seed)  # worker seeds, independent of epochs run before
-                losses.append(_train_epoch(trained, loader, optimizer, pos_weight, process, bar, epoch, schedule.epochs, description))
+                train_loss = _train_epoch(trained, loader, optimizer, pos_weight, process, bar, epoch, schedule.epochs, description)
+                validation_loss = None
+                if validation_loader is not None:
+                    validation_loss = _validation_loss(model, validation_loader, validation_pos_weight, process)
+                    bar.set_postfix(loss=f"{train_loss:.4f}", val=f"{validation_loss:.4f}")
+                history.add(train_loss, validation_loss)
                 if process.is_main:
                     save_checkpoint(
                         checkpoint_path(out_dir, epoch), model, optimizer, epoch, config,
                         extra={
                             "run": identity,
-                            "losses": list(losses),
+                            **history.to_checkpoint(),
                             "pos_weight": pos_weight,
+                            "validation_pos_weight": validation_pos_weight,
                             "rng_state": {"seed": int(seed), "derivation": "SeedSequence([seed, epoch, rank]) at each epoch's start"},
                         },
                     )
+                    # Only once the new checkpoint is on disk and vouched for: the best and the last stay.
+                    _remove_checkpoints_but(out_dir, {epoch, history.best_epoch})
+        epochs_run = len(history.train_losses)
         if remaining == 0 and process.is_main and progress:
-            tqdm.write(f"{description or 'train'}: {schedule.epochs} epochs already in {checkpoint_path(out_dir, start_epoch)}")
+            tqdm.write(f"{description or 'train'}: {epochs_run} epochs already in {checkpoint_path(out_dir, epochs_run)}")
         if process.world_size > 1:
             dist.barrier()  # every rank returns only once rank 0's last checkpoint is on disk
         return TrainResult(
-            checkpoint_path=checkpoint_path(out_dir, schedule.epochs),
-            epoch_losses=tuple(losses),
+            checkpoint_path=checkpoint_path(out_dir, history.best_epoch),
+            last_checkpoint_path=checkpoint_path(out_dir, epochs_run),
+            best_epoch=history.best_epoch,
+            epoch_losses=tuple(history.train_losses),
+            validation_losses=tuple(history.validation_losses),
+            stopped_early=epochs_run < schedule.epochs,
             resumed_from_epoch=start_epoch,
             pos_weight=pos_weight,
         )
+
+
+@dataclass
+class _History:
+    """Losses of the epochs run so far and the epoch chosen among them (0 before the first)."""
+
+    train_losses: list[float] = field(default_factory=list)
+    validation_losses: list[float] = field(default_factory=list)
+    best_epoch: int = 0
+
+    @classmethod
+    def from_checkpoint(cls, checkpoint: dict[str, Any], epoch: int) -> _History:
+        return cls([float(v) for v in checkpoint["losses"][:epoch]],
+                   [float(v) for v in checkpoint["validation_losses"][:epoch]], int(checkpoint["best_epoch"]))
+
+    def add(self, train_loss: float, validation_loss: float | None) -> None:
+        self.train_losses.append(train_loss)
+        epoch = len(self.train_losses)
+        if validation_loss is None:
+            self.best_epoch = epoch
+            return
+        self.validation_losses.append(validation_loss)
+        # Strictly lower: of equal losses the earlier epoch stays (NaN never improves on a number).
+        if self.best_epoch == 0 or validation_loss < self.validation_losses[self.best_epoch - 1]:
+            self.best_epoch = epoch
+
+    def finished(self, schedule: Schedule) -> bool:
+        """Every epoch ran, or ``schedule.patience`` epochs in a row did not improve on the best."""
+        epochs_run = len(self.train_losses)
+        if epochs_run >= schedule.epochs:
+            return True
+        return schedule.patience is not None and epochs_run > 0 and epochs_run - self.best_epoch >= schedule.patience
+
+    def to_checkpoint(self) -> dict[str, Any]:
+        return {"losses": list(self.train_losses), "validation_losses": list(self.validation_losses),
+                "best_epoch": self.best_epoch}
+
+
+def _validation_loss(model: nn.Module, loader: DataLoader, pos_weight: float, process: _Process) -> float:
+    """The mean masked loss per labelled cell of ``model`` (eval mode) over every process's share."""
+    if process.world_size > 1:
+        # Batch-norm buffers drift apart per process; rank 0's are the ones its checkpoint stores.
+        for buffer in model.buffers():
+            dist.broadcast(buffer, src=0)
+    was_training = model.training
+    model.eval()
+    totals = torch.zeros(2, dtype=torch.float64)
+    try:
+        with torch.inference_mode():
+            for inputs, targets in loader:
+                logits = model(inputs.to(process.device, non_blocking=True))
+                loss_sum, n_labelled = masked_bce(logits, targets.to(process.device, non_blocking=True), pos_weight)
+                totals += torch.stack([loss_sum, n_labelled]).to(torch.float64).cpu()
+    finally:
+        model.train(was_training)
+    if process.world_size > 1:
+        dist.all_reduce(totals)
+    if float(totals[1]) == 0.0:
+        raise ZendarError("train: the validation masks have no labelled cell (every cell uncertain)")
+    return float(totals[0] / totals[1])
 
 
 def _train_epoch(
@@ -501,8 +704,12 @@ def predict_masks(
 
 __all__ = [
     "MAX_POS_WEIGHT",
+    "ONEDNN_MAX_CPU_ISA",
+    "TRAINING_THREADS",
     "TrainResult",
     "checkpoint_path",
+    "deterministic_torch",
+    "hold_out_tail",
     "masked_bce",
     "positive_class_weight",
     "predict_masks",

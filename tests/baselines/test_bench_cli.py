@@ -88,8 +88,18 @@ def test_quick_bench_writes_table_one(quick_run):
     assert "| CFAR | - | - |" in table and "| 65.0 | 43.0 | 13.3 |" in table  # ours beside the paper's
     with open(out / "table.csv", newline="") as handle:
         assert [line["method"] for line in csv.DictReader(handle)] == [method for method, _, _ in ROWS]
-    for picture in ("pr_near.png", "pr_mid.png", "pr_far.png", "pr_all.png", "bev.png"):
+    for picture in ("pr_near.png", "pr_mid.png", "pr_far.png", "pr_all.png", "bev.png", "curves.png"):
         assert (out / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for row in results["rows"][1:]:
+        seed_dir = out / "rows" / row["key"] / "seed-0"
+        record = json.loads((seed_dir / "checkpoint.json").read_text())
+        assert record["validation"]["source"] == "val split"
+        phases = ["pretrain", "fine-tune"] if row["unsupervised"] else ["supervised"]
+        assert list(record["phases"]) == phases
+        curves = json.loads((seed_dir / "curves.json").read_text())
+        for phase, curve in zip(record["phases"].values(), curves["phases"]):
+            assert len(curve["epochs"]) == phase["epochs_run"] == len(phase["validation_losses"])
+            assert phase["best_epoch"] == 1 + min(range(phase["epochs_run"]), key=phase["validation_losses"].__getitem__)
     quality = json.loads((out / "autolabel_quality.json").read_text())
     assert set(quality["bands"]) == set(BANDS) and quality["n_frames"] > 0
     # The chain's constants, fitted per detector on the labelled part and checked on validation.

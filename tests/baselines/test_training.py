@@ -1,4 +1,5 @@
-"""Training: the masked loss, learning a hand-made task, determinism, resume, init_from, prediction."""
+"""Training: the masked loss, learning a hand-made task, the epoch chosen by validation, early stopping,
+determinism, resume, init_from, prediction."""
 
 from __future__ import annotations
 
@@ -8,14 +9,17 @@ import math
 import numpy as np
 import pytest
 import torch
+from torch.utils.data import ConcatDataset
 
 from zendar_dataset.errors import ZendarError
 
+from zendar_baselines.cnn import checkpoints
 from zendar_baselines.cnn.checkpoints import MANIFEST_NAME, load_checkpoint
 from zendar_baselines.bench.configs import Schedule
 from zendar_baselines.cnn.mask_frames import MaskFrames
 from zendar_baselines.cnn.training import (
     checkpoint_path,
+    hold_out_tail,
     masked_bce,
     positive_class_weight,
     predict_masks,
@@ -158,15 +162,25 @@ def test_resume_equals_an_uninterrupted_run(tmp_path, task_data):
     _assert_same_weights(_weights(uninterrupted), _weights(again_model))
 
 
-def test_checkpoint_the_manifest_does_not_vouch_for_is_recomputed(tmp_path, task_data):
+def test_checkpoint_the_manifest_does_not_vouch_for_is_recomputed(tmp_path, task_data, monkeypatch):
     reference = _model(0)
     train(reference, task_data, SCHEDULE, seed=2, out_dir=tmp_path / "ref", progress=False)
     out = tmp_path / "run"
-    train(_model(0), task_data, SCHEDULE, seed=2, out_dir=out, progress=False)
-    # As if the process died between renaming epoch 2 into place and recording it in the manifest.
-    manifest = json.loads((out / MANIFEST_NAME).read_text())
-    del manifest["epoch-0002.pt"]
-    (out / MANIFEST_NAME).write_text(json.dumps(manifest))
+    # The process dies between renaming epoch 2 into place and recording it in the manifest (so
+    # epoch 1, removed only once epoch 2 is vouched for, is still there).
+    real_write = checkpoints.write_text_atomic
+
+    def dying_write(path, text, *args, **kwargs):
+        if path.name == MANIFEST_NAME and "epoch-0002.pt" in text:
+            raise KeyboardInterrupt
+        return real_write(path, text, *args, **kwargs)
+
+    monkeypatch.setattr(checkpoints, "write_text_atomic", dying_write)
+    with pytest.raises(KeyboardInterrupt):
+        train(_model(0), task_data, SCHEDULE, seed=2, out_dir=out, progress=False)
+    monkeypatch.undo()
+    assert "epoch-0002.pt" not in json.loads((out / MANIFEST_NAME).read_text())
+    assert (out / "epoch-0002.pt").is_file()
     model = _model(0)
     result = train(model, task_data, SCHEDULE, seed=2, out_dir=out, progress=False)
     assert result.resumed_from_epoch == 1
@@ -246,3 +260,158 @@ def test_densenet_37_trains_and_comes_back_from_its_checkpoint(tmp_path, task_da
     np.testing.assert_array_equal(predict_masks(rebuilt, inputs, 4), predict_masks(model, inputs, 4))
     with pytest.raises(ZendarError, match="densenet-67"):
         load_checkpoint(result.checkpoint_path, expected_architecture={**rebuilt.architecture, "name": "densenet-67"})
+
+
+# --- validation: the epoch chosen, early stopping, what stays on disk ---------------------------
+
+
+class BiasOnly(torch.nn.Module):
+    """Logit = one learned bias for every cell: its loss on any mask is known in closed form."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.architecture = {"name": "bias-only", "in_channels": 1, "width_scale": 1.0}
+        self.bias = torch.nn.Parameter(torch.zeros(1))
+
+    def forward(self, inputs):
+        return self.bias.view(1, 1, 1, 1).expand(inputs.shape[0], 1, *inputs.shape[2:])
+
+
+N_CELLS = 50 * 20
+VALIDATION_MOVING = 47  # of the labelled cells; the validation masks' positive weight is sqrt(953 / 47)
+
+
+def _bias_task(n_samples=4):
+    """Training masks all background (the bias only falls: ~0.5 per Adam step of lr 0.5), and validation
+    masks 4.7 % moving with an uncertain row (left out). Weighted by the validation masks' own positive
+    weight w = sqrt(953 / 47), the validation loss is least where sigmoid(b) = w q / (w q + 1 - q), at
+    b = -1.50 (epoch 3), and rises after; weighted by the training masks' (1.0) it would be least at
+    b = logit(0.047) = -3.01 (epoch 6)."""
+    inputs = np.zeros((n_samples, 1, 50, 20), np.float32)
+    train_masks = np.zeros((n_samples, 50, 20), np.uint8)
+    validation_masks = np.zeros((n_samples, 51, 20), np.uint8)
+    validation_masks.reshape(n_samples, -1)[:, :VALIDATION_MOVING] = 1
+    validation_masks[:, 50, :] = 2
+    validation_inputs = np.zeros((n_samples, 1, 51, 20), np.float32)
+    return MaskFrames(inputs, train_masks), MaskFrames(validation_inputs, validation_masks)
+
+
+def _validation_loss_by_hand(bias: float) -> float:
+    q = VALIDATION_MOVING / N_CELLS
+    weight = math.sqrt((N_CELLS - VALIDATION_MOVING) / VALIDATION_MOVING)
+    p = 1 / (1 + math.exp(-bias))
+    # Summed over cells and divided by their number: the mean per labelled cell.
+    return -(weight * q * math.log(p) + (1 - q) * math.log(1 - p))
+
+
+BIAS_SCHEDULE = Schedule(lr=0.5, batch_size=4, epochs=10, patience=2)
+
+
+def test_the_epoch_of_least_validation_loss_is_chosen_and_training_stops_after_patience(tmp_path):
+    data, validation = _bias_task()
+    result = train(BiasOnly(), data, BIAS_SCHEDULE, seed=0, out_dir=tmp_path, validation=validation, progress=False)
+    assert result.best_epoch == 3 and result.stopped_early
+    assert len(result.epoch_losses) == len(result.validation_losses) == 5  # epochs 4 and 5 did not improve
+    assert result.checkpoint_path == checkpoint_path(tmp_path, 3)
+    assert result.last_checkpoint_path == checkpoint_path(tmp_path, 5)
+    # Only the chosen and the last epoch stay, both vouched for by the manifest.
+    assert sorted(p.name for p in tmp_path.glob("epoch-*.pt")) == ["epoch-0003.pt", "epoch-0005.pt"]
+    assert sorted(json.loads((tmp_path / MANIFEST_NAME).read_text())) == ["epoch-0003.pt", "epoch-0005.pt"]
+    best, last = load_checkpoint(result.checkpoint_path), load_checkpoint(result.last_checkpoint_path)
+    # The validation loss recorded is the masked loss of the checkpoint's own weights (eval mode).
+    for checkpoint in (best, last):
+        bias = float(checkpoint["model_state"]["bias"])
+        recorded = checkpoint["validation_losses"][checkpoint["epoch"] - 1]
+        assert recorded == pytest.approx(_validation_loss_by_hand(bias), rel=1e-5)
+    assert -2.0 < float(best["model_state"]["bias"]) < -1.0 and last["best_epoch"] == 3
+    assert last["validation_losses"] == list(result.validation_losses)
+    losses = result.validation_losses
+    assert losses[0] > losses[1] > losses[2] < losses[3] < losses[4]
+
+
+def test_resuming_keeps_the_choice_of_an_uninterrupted_run(tmp_path):
+    data, validation = _bias_task()
+    whole = train(BiasOnly(), data, BIAS_SCHEDULE, seed=0, out_dir=tmp_path / "whole", validation=validation,
+                  progress=False)
+    cut = Schedule(BIAS_SCHEDULE.lr, BIAS_SCHEDULE.batch_size, 4, BIAS_SCHEDULE.patience)
+    first = train(BiasOnly(), data, cut, seed=0, out_dir=tmp_path / "cut", validation=validation, progress=False)
+    assert first.best_epoch == 3 and not first.stopped_early and len(first.epoch_losses) == 4
+    resumed = train(BiasOnly(), data, BIAS_SCHEDULE, seed=0, out_dir=tmp_path / "cut", validation=validation,
+                    progress=False)
+    assert resumed.resumed_from_epoch == 4
+    assert (resumed.best_epoch, resumed.epoch_losses, resumed.validation_losses, resumed.stopped_early) == (
+        whole.best_epoch, whole.epoch_losses, whole.validation_losses, whole.stopped_early)
+    finished = train(BiasOnly(), data, BIAS_SCHEDULE, seed=0, out_dir=tmp_path / "cut", validation=validation,
+                     progress=False)
+    assert finished.resumed_from_epoch == 5 and finished.validation_losses == whole.validation_losses
+    for result in (resumed, finished):
+        assert torch.equal(load_checkpoint(result.checkpoint_path)["model_state"]["bias"],
+                           load_checkpoint(whole.checkpoint_path)["model_state"]["bias"])
+
+
+def test_without_validation_the_last_epoch_is_chosen_and_patience_is_refused(tmp_path, task_data):
+    result = train(_model(0), task_data, SCHEDULE, seed=0, out_dir=tmp_path / "plain", progress=False)
+    assert result.best_epoch == 2 and result.checkpoint_path == result.last_checkpoint_path
+    assert result.validation_losses == () and not result.stopped_early
+    with pytest.raises(ZendarError, match="give validation data"):
+        train(_model(0), task_data, Schedule(1e-2, 8, 2, patience=1), seed=0, out_dir=tmp_path / "p", progress=False)
+    with pytest.raises(ZendarError, match="patience must be None or a positive integer"):
+        train(_model(0), task_data, Schedule(1e-2, 8, 2, patience=0), seed=0, out_dir=tmp_path / "q",
+              validation=task_data, progress=False)
+
+
+def test_validation_masks_without_a_labelled_cell_are_refused(tmp_path, task_data):
+    inputs, _ = moving_target_task(4, seed=5)
+    uncertain = MaskFrames(inputs, np.full((4, 16, 8), 2, np.uint8))
+    with pytest.raises(ZendarError, match="validation masks have no labelled cell"):
+        train(_model(0), task_data, SCHEDULE, seed=0, out_dir=tmp_path, validation=uncertain, progress=False)
+
+
+def test_hold_out_tail_keeps_a_gap_between_the_parts():
+    parts = ConcatDataset([MaskFrames(np.zeros((12, 1, 2, 2), np.float32), np.zeros((12, 2, 2), np.uint8), window=3),
+                           MaskFrames(np.zeros((7, 1, 2, 2), np.float32), np.zeros((7, 2, 2), np.uint8), window=3)])
+    kept, held_out = hold_out_tail(parts, 0.2, gap=2)
+    # Part 0: 10 windows, 2 held out (8, 9), windows 6 and 7 dropped; part 1: 5 windows, 1 held out (4), 2 kept.
+    assert [list(p.indices) for p in kept.datasets] == [list(range(6)), [0, 1]]
+    assert [list(p.indices) for p in held_out.datasets] == [[8, 9], [4]]
+    # No map in both: kept windows end at map 7 of part 0, held-out ones start at map 8.
+    assert max(kept.datasets[0].indices) + 3 - 1 < min(held_out.datasets[0].indices)
+    with pytest.raises(ZendarError, match="part 1 has 5 samples, too few"):
+        hold_out_tail(parts, 0.5, gap=2)
+
+
+# --- reproducibility ----------------------------------------------------------------------------
+
+
+class _SettingsSpy(TinyMaskNet):
+    """Records torch's thread count and deterministic mode at every forward."""
+
+    seen: set
+
+    def forward(self, inputs):
+        self.seen.add((torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()))
+        return super().forward(inputs)
+
+
+def test_training_runs_deterministic_with_a_fixed_thread_count_and_restores_the_settings(tmp_path, task_data):
+    from zendar_baselines.cnn.training import TRAINING_THREADS
+
+    before = torch.get_num_threads()
+    seed_everything(0)
+    spy = _SettingsSpy(2)
+    spy.seen = set()
+    assert not torch.are_deterministic_algorithms_enabled()
+    train(spy, task_data, SCHEDULE, seed=0, out_dir=tmp_path, validation=task_data, progress=False)
+    assert spy.seen == {(TRAINING_THREADS, True)}
+    assert torch.get_num_threads() == before and not torch.are_deterministic_algorithms_enabled()
+
+
+def test_the_weights_do_not_depend_on_the_callers_thread_count(tmp_path, task_data):
+    runs = []
+    for threads in (1, 2):
+        torch.set_num_threads(threads)
+        model = _model(0)
+        train(model, task_data, SCHEDULE, seed=5, out_dir=tmp_path / str(threads), validation=task_data, progress=False)
+        runs.append(_weights(model))
+    torch.set_num_threads(1)
+    _assert_same_weights(*runs)
