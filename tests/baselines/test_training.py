@@ -371,13 +371,14 @@ def test_hold_out_tail_keeps_a_gap_between_the_parts():
     parts = ConcatDataset([MaskFrames(np.zeros((12, 1, 2, 2), np.float32), np.zeros((12, 2, 2), np.uint8), window=3),
                            MaskFrames(np.zeros((7, 1, 2, 2), np.float32), np.zeros((7, 2, 2), np.uint8), window=3)])
     kept, held_out = hold_out_tail(parts, 0.2, gap=2)
-    # Part 0: 10 windows, 2 held out (8, 9), windows 6 and 7 dropped; part 1: 5 windows, 1 held out (4), 2 kept.
-    assert [list(p.indices) for p in kept.datasets] == [list(range(6)), [0, 1]]
-    assert [list(p.indices) for p in held_out.datasets] == [[8, 9], [4]]
-    # No map in both: kept windows end at map 7 of part 0, held-out ones start at map 8.
-    assert max(kept.datasets[0].indices) + 3 - 1 < min(held_out.datasets[0].indices)
-    with pytest.raises(ZendarError, match="part 1 has 5 samples, too few"):
-        hold_out_tail(parts, 0.5, gap=2)
+    # One sample per map (the first windows padded): part 0 has 12, 3 held out (9-11), samples 7 and 8
+    # dropped; part 1 has 7, 2 held out (5, 6), samples 3 and 4 dropped.
+    assert [list(p.indices) for p in kept.datasets] == [list(range(7)), [0, 1, 2]]
+    assert [list(p.indices) for p in held_out.datasets] == [[9, 10, 11], [5, 6]]
+    # No map in both: kept windows end at map 6 of part 0, held-out ones start at map 9 - 3 + 1 = 7.
+    assert max(kept.datasets[0].indices) < min(held_out.datasets[0].indices) - 3 + 1
+    with pytest.raises(ZendarError, match="part 1 has 7 samples, too few"):
+        hold_out_tail(parts, 0.6, gap=2)
 
 
 # --- reproducibility ----------------------------------------------------------------------------

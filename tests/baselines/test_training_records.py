@@ -48,16 +48,16 @@ def test_without_validation_scenes_labelled_frames_are_held_out_with_a_warning(c
     run = SimpleNamespace(dataset=_Splits(train=["scene-0000", "scene-0001"], val=[], test=["scene-0002"]),
                           root=Path("/data/set"), config=SimpleNamespace(window=2))
     labels = SimpleNamespace(split=SimpleNamespace(labelled=["scene-0000"]), validation_dir=None)
-    labelled = ConcatDataset([_scene_frames(21, 0), _scene_frames(11, 1)])  # 20 and 10 windows
+    labelled = ConcatDataset([_scene_frames(21, 0), _scene_frames(11, 1)])  # 21 and 11 windows (the first padded)
     kept, validation, record = steps.validation_frames(run, labels, labelled)
     assert "warning: /data/set has no validation scenes" in capsys.readouterr().err
     assert record == {"source": "held-out labelled training frames", "scenes": ["scene-0000"],
-                      "fraction": steps.HOLD_OUT_FRACTION, "window_stride": 2, "n_samples": 2 + 1}
+                      "fraction": steps.HOLD_OUT_FRACTION, "window_stride": 2, "n_samples": 3 + 2}
     # The last 20 % of each part is held out, one window (K - 1) apart from what trains; of it every
     # K-th window validates (windows that share no map).
     assert [list(part.indices) for part in kept.datasets] == [list(range(15)), list(range(7))]
     held_out = [[part.dataset.indices[i] for i in part.indices] for part in validation.datasets]
-    assert held_out == [[16, 18], [8]]
+    assert held_out == [[16, 18, 20], [8, 10]]
 
 
 def test_the_validation_masks_refuse_a_scene_of_the_test_split(tmp_path):
