@@ -399,3 +399,16 @@ def test_mask_frame_subset_serves_and_counts_the_kept_samples() -> None:
         part[2]
     with pytest.raises(ZendarError, match=r"sample indices must lie in \[0, 4\)"):
         MaskFrameSubset(inputs, targets, 2, [4])
+
+
+def test_bench_stops_with_exit_2_when_the_labelled_part_has_too_few_cars(dataset: Path, tmp_path: Path, monkeypatch,
+                                                                        capsys) -> None:
+    from zendar_baselines.bench import cli
+
+    demanding = dataclasses.replace(get_config("tiny"), min_labelled_cars=1000)
+    monkeypatch.setattr(cli, "get_config", lambda name: demanding)
+    code = cli.main(["--quick", "--data", str(dataset), "--out", str(tmp_path / "out")])
+    stderr = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in stderr
+    assert "too few labelled cars for labelled_fraction 0.25" in stderr and "at least 1000 per band" in stderr
+    assert not (tmp_path / "out" / "rows").exists()  # stopped before any training
