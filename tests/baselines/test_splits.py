@@ -13,6 +13,7 @@ import pytest
 
 from zendar_dataset.detection.boxes import nearest_label_frame
 from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval.car_counts import dataset_car_counts
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim.generate import synthesize_dataset
 
@@ -138,6 +139,24 @@ def test_labelled_cars_are_counted_in_the_labelled_segments_alone(dataset: Path)
                     cars[band].add((scene_id, int(labels["track_id"][row])))
     assert {band: split.labelled_cars[band] for band in BANDS_M} == {band: len(c) for band, c in cars.items()}
     assert sum(split.labelled_cars[band] for band in BANDS_M) > 0
+
+
+def test_dataset_counts_are_the_distinct_tracks_of_each_split_per_band(dataset: Path, document: dict) -> None:
+    counts = dataset_car_counts(dataset)
+    index = open_dataset(dataset)
+    for split, scene_ids in document["splits"].items():
+        cars = {band: set() for band in BANDS_M}
+        for scene_id in scene_ids:
+            with index.open_scene(scene_id) as reader:
+                labels = reader.labels()
+            for x, y, track in zip(labels["x"].tolist(), labels["y"].tolist(), labels["track_id"].tolist()):
+                for band, (low, high) in BANDS_M.items():
+                    if low <= (x * x + y * y) ** 0.5 < high:
+                        cars[band].add((scene_id, track))
+        assert {band: counts[split].cars[band] for band in BANDS_M} == {band: len(c) for band, c in cars.items()}, split
+        assert sum(sum(kinds.values()) for kinds in [counts[split].by_kind["all"]]) == counts[split].cars["all"]
+        assert "unknown" not in counts[split].by_kind["all"]  # every car got a kind from the ego's headings
+    assert counts["train"].cars["all"] > 0
 
 
 def test_too_few_labelled_cars_for_the_fraction_is_refused_with_the_counts(dataset: Path) -> None:
