@@ -22,10 +22,11 @@ scenes) are still read: each labelled scene is one segment spanning all time.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ import numpy as np
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
 from zendar_dataset.detection.scene import frame_timestamps
-from zendar_dataset.eval.car_counts import CarCounts, count_distinct_cars, scene_labels
+from zendar_dataset.eval.car_counts import scenes_car_counts
 from zendar_dataset.eval.protocol import BAND_NAMES, RANGE_BANDS
 from zendar_dataset.format.reader import DatasetIndex, SceneReader
 from zendar_dataset.output_location import refuse_output_inside
@@ -255,24 +256,6 @@ def _format_counts(counts: dict[str, int]) -> str:
     return ", ".join(f"{band} {counts[band]}" for band in RANGE_BANDS)
 
 
-def labelled_car_counts(dataset: DatasetIndex, scene_ids: Iterable[str],
-                        keep_times: Callable[[str], Callable[[np.ndarray], np.ndarray]] | None = None) -> CarCounts:
-    """Distinct labelled cars per band over ``scene_ids`` (scenes without labels add nothing).
-
-    Parameters
-    ----------
-    keep_times
-        ``scene_id -> (timestamps_ns [N] -> [N] bool)``: the label rows that count; all when None.
-    """
-    tables = []
-    for scene_id in scene_ids:
-        with dataset.open_scene(scene_id) as reader:
-            table = scene_labels(reader, None if keep_times is None else keep_times(scene_id))
-        if table is not None:
-            tables.append(table)
-    return count_distinct_cars(tables)
-
-
 def make_split(dataset_root: DatasetIndex | str | os.PathLike, labelled_fraction: float, seed: int, *,
                frames_per_segment: int = DEFAULT_SEGMENT_FRAMES, min_cars_per_band: int = 0) -> SemiSupervisedSplit:
     """Draw the labelled segments of a dataset's training scenes.
@@ -341,10 +324,10 @@ def make_split(dataset_root: DatasetIndex | str | os.PathLike, labelled_fraction
         frames_per_segment=int(frames_per_segment),
         n_segments=len(segments),
     )
-    counts = labelled_car_counts(dataset, split.labelled, lambda scene_id: lambda stamps: split.is_labelled(scene_id, stamps))
+    counts = scenes_car_counts(dataset, split.labelled, lambda scene_id: lambda stamps: split.is_labelled(scene_id, stamps))
     short = counts.shortfall(int(min_cars_per_band), RANGE_BANDS)
     if short:
-        everything = labelled_car_counts(dataset, train)
+        everything = scenes_car_counts(dataset, train)
         problem = (
             f"{where}: too few labelled cars for labelled_fraction {labelled_fraction:g}: its "
             f"{len(chosen)} of {len(segments)} training segments (seed {seed}) hold {_format_counts(counts.cars)} distinct "
@@ -406,7 +389,7 @@ def _segment_problems(document: dict, where: str) -> list[str]:
     for scene_id, spans in segments.items():
         ok = isinstance(spans, list) and spans and all(
             isinstance(span, list) and len(span) == 2 and all(_is_count(t) for t in span) and span[0] < span[1] for span in spans)
-        if not ok or any(a[1] > b[0] for a, b in zip(spans, spans[1:])):
+        if not ok or any(a[1] > b[0] for a, b in itertools.pairwise(spans)):
             problems.append(f"{where}: labelled_segments: {scene_id}: expected a non-empty list of [start_ns, end_ns] "
                             f"integers, start < end, in time order and disjoint, found {spans!r}")
     for key, low in (("frames_per_segment", 1), ("n_segments", 2)):
@@ -429,8 +412,8 @@ def _document_problems(document: Any, where: str) -> list[str]:
         return [f"{where}: format: expected {FORMAT_NAME!r}, found {document.get('format')!r}"]
     version = document.get("format_version")
     if isinstance(version, bool) or version not in READABLE_VERSIONS:
-        return [f"{where}: format_version: expected one of {list(READABLE_VERSIONS)}, found {version!r} "
-                "(a newer file needs a newer zendar-dataset; an unknown one, a new split)"]
+        return [(f"{where}: format_version: expected one of {list(READABLE_VERSIONS)}, found {version!r}; draw the "
+                 "split again with make_split (zendar-bench draws a new one in a fresh --out directory)")]
     problems = _scene_list_problems(document, "labelled", where)
     problems += _scene_list_problems(document, "unlabelled", where, may_be_empty=version >= 2)
     if not problems:
@@ -512,9 +495,9 @@ def read_split(path: str | os.PathLike, dataset_root: DatasetIndex | str | os.Pa
             problems.append(f"{where}: scenes {outside} are not in the {TRAIN_SPLIT} split of {dataset_location(dataset_root)}")
     if problems:
         raise SplitError("; ".join(problems), problems)
-    common = dict(labelled=tuple(document["labelled"]), unlabelled=tuple(document["unlabelled"]),
-                  labelled_fraction=float(document["labelled_fraction"]), seed=document["seed"],
-                  dataset_fingerprint=document["dataset_fingerprint"])
+    common = {"labelled": tuple(document["labelled"]), "unlabelled": tuple(document["unlabelled"]),
+              "labelled_fraction": float(document["labelled_fraction"]), "seed": document["seed"],
+              "dataset_fingerprint": document["dataset_fingerprint"]}
     if document["format_version"] == 1:
         return SemiSupervisedSplit(**common, labelled_segments={scene_id: (WHOLE_SCENE,) for scene_id in document["labelled"]})
     return SemiSupervisedSplit(
@@ -536,7 +519,6 @@ __all__ = [
     "ManualLabelLeakError",
     "SemiSupervisedSplit",
     "SplitError",
-    "labelled_car_counts",
     "make_split",
     "read_split",
     "scene_segments",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 from pathlib import Path
 
@@ -76,7 +77,7 @@ def test_an_instant_lies_in_the_segment_of_its_nearest_label_frame(per_segment: 
     stamps = np.cumsum(rng.integers(90_000_000, 110_000_001, size=10)).astype(np.int64)  # irregular, odd gaps too
     segments = scene_segments(stamps, per_segment)
     assert len(segments) == -(-10 // per_segment)
-    assert all(a[1] == b[0] for a, b in zip(segments, segments[1:]))  # contiguous
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(segments))  # contiguous
     queries = np.concatenate([rng.integers(stamps[0], stamps[-1], 2000), stamps,
                               (stamps[:-1] + stamps[1:]) // 2, (stamps[:-1] + stamps[1:]) // 2 + 1])
     for t in queries.tolist():

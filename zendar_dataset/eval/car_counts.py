@@ -15,7 +15,7 @@ labelled frames, otherwise by its heading relative to the ego's (median over its
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,6 +23,7 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BAND_NAMES, BANDS_M
+from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
 
 #: Kinds of motion, in the order the simulator's traffic draws them.
 MOTION_KINDS: tuple[str, ...] = ("ahead", "oncoming", "crossing", "turning")
@@ -164,7 +165,8 @@ def count_distinct_cars(scenes: Iterable[SceneLabels]) -> CarCounts:
     return CarCounts({band: len(members) for band, members in cars.items()}, rows_per_band, by_kind)
 
 
-def scene_labels(reader, keep_timestamps_ns=None) -> SceneLabels | None:
+def scene_labels(reader: SceneReader,
+                 keep_timestamps_ns: Callable[[np.ndarray], np.ndarray] | None = None) -> SceneLabels | None:
     """The :class:`SceneLabels` of an open scene (with the ego's headings), or None without labels.
 
     Parameters
@@ -187,7 +189,26 @@ def scene_labels(reader, keep_timestamps_ns=None) -> SceneLabels | None:
     return SceneLabels(reader.scene_id, labels, ego_yaw, keep)
 
 
-def dataset_car_counts(root, splits: Iterable[str] | None = None) -> dict[str, CarCounts]:
+def scenes_car_counts(index: DatasetIndex, scene_ids: Iterable[str],
+                      keep_times: Callable[[str], Callable[[np.ndarray], np.ndarray]] | None = None) -> CarCounts:
+    """Distinct labelled cars per band over some scenes of an opened dataset (scenes without labels add nothing).
+
+    Parameters
+    ----------
+    keep_times
+        ``scene_id -> (timestamps_ns [N] int64 -> [N] bool)``: the label rows that count, by their
+        frame time (e.g. a labelled part's segments); every row when None.
+    """
+    tables = []
+    for scene_id in scene_ids:
+        with index.open_scene(scene_id) as reader:
+            table = scene_labels(reader, None if keep_times is None else keep_times(scene_id))
+        if table is not None:
+            tables.append(table)
+    return count_distinct_cars(tables)
+
+
+def dataset_car_counts(root: str | os.PathLike | DatasetIndex, splits: Iterable[str] | None = None) -> dict[str, CarCounts]:
     """Distinct labelled cars per band of each split of a dataset.
 
     Parameters
@@ -202,20 +223,9 @@ def dataset_car_counts(root, splits: Iterable[str] | None = None) -> dict[str, C
     dict of str to CarCounts
         Split name -> its counts.
     """
-    from zendar_dataset.format.reader import DatasetIndex, open_dataset
-
     index = root if isinstance(root, DatasetIndex) else open_dataset(os.fspath(root) if isinstance(root, os.PathLike) else root)
     names = list(index.splits) if splits is None else list(splits)
-    out = {}
-    for split in names:
-        tables = []
-        for scene_id in index.scene_ids(split):
-            with index.open_scene(scene_id) as reader:
-                table = scene_labels(reader)
-            if table is not None:
-                tables.append(table)
-        out[split] = count_distinct_cars(tables)
-    return out
+    return {split: scenes_car_counts(index, index.scene_ids(split)) for split in names}
 
 
 __all__ = [
@@ -225,5 +235,6 @@ __all__ = [
     "count_distinct_cars",
     "dataset_car_counts",
     "scene_labels",
+    "scenes_car_counts",
     "track_motion_kinds",
 ]
