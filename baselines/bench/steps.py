@@ -124,7 +124,7 @@ def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Pat
     scene's cubes as the automatic one does; the masks are made from the scene seen through
     :meth:`SemiSupervisedSplit.labelled_view` (its labels hold the labelled segments' rows only), and
     every cube outside the labelled segments is then all UNCERTAIN, which the loss ignores: no manual
-    label outside the labelled segments is read, and none reaches training.
+    label outside the labelled segments shapes a mask, and none reaches training.
     """
     split.check_manual_label_use(split.labelled)
     parameters = {**mask_parameters(), "kind": "labels"}
@@ -205,7 +205,7 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupe
                 split.check_manual_label_times(scene_id, newest[chosen])
                 if chosen.size:
                     parts.append(MaskFrameSubset(maps, targets, run.config.window, chosen))
-    if not parts:
+    if split is not None and not parts:
         raise ZendarError(f"{store_dir}: no training sample of {scenes} has its newest cube in a labelled segment")
     return ConcatDataset(parts)
 
