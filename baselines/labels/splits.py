@@ -49,9 +49,9 @@ FORMAT_VERSION = 2
 READABLE_VERSIONS = (1, FORMAT_VERSION)
 TRAIN_SPLIT = "train"
 _OTHER_SPLITS = ("val", "test")
-#: Label frames per segment: 1 s at the simulator's 10 Hz, shorter than a car stays in view, so the
-#: labelled part samples many cars rather than many frames of few.
-DEFAULT_SEGMENT_FRAMES = 10
+#: Label frames per segment: half a second at the simulator's 10 Hz, much shorter than a car stays in
+#: view, so the labelled part samples many cars rather than many frames of few.
+DEFAULT_SEGMENT_FRAMES = 5
 #: The one segment of a labelled scene of a version-1 file: all of GPS time.
 WHOLE_SCENE: tuple[int, int] = (0, 2**63 - 1)
 
