@@ -31,6 +31,7 @@ from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.run_directory import read_json
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_index
+from zendar_baselines.labels.mask_classes import UNCERTAIN
 from zendar_baselines.labels.mask_store import MaskStore
 from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
@@ -61,8 +62,15 @@ def mask_parameters(params: MaskParams | None = None) -> dict[str, Any]:
 
 
 def write_semi_supervised_split(run: RunContext, step_dir: Path) -> None:
-    """``split.json``: the training scenes' labelled and unlabelled parts (seeded by the config)."""
-    split = make_split(run.dataset, run.config.labelled_fraction, seed=run.config.sim_seed)
+    """``split.json``: the training scenes' labelled segments (seeded by the config).
+
+    Raises
+    ------
+    SplitError
+        When the labelled part holds fewer than the config's ``min_labelled_cars`` distinct cars in a band.
+    """
+    split = make_split(run.dataset, run.config.labelled_fraction, seed=run.config.sim_seed,
+                       min_cars_per_band=run.config.min_labelled_cars)
     write_split(split, step_dir / SPLIT_FILE, dataset_root=run.dataset)
 
 
@@ -126,7 +134,14 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
 
 
 def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path) -> None:
-    """Manual-label masks of the labelled part of the training scenes only (a store of the same format)."""
+    """Manual-label masks of the labelled segments only (a store of the same format as the automatic one).
+
+    Every cube of each scene with a labelled segment gets a mask, so the store lines up with the
+    scene's cubes as the automatic one does; the masks are made from the scene seen through
+    :meth:`SemiSupervisedSplit.labelled_view` (its labels hold the labelled segments' rows only), and
+    every cube outside the labelled segments is then all UNCERTAIN, which the loss ignores: no manual
+    label outside the labelled segments shapes a mask, and none reaches training.
+    """
     split.check_manual_label_use(split.labelled)
     _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks")
 
@@ -157,8 +172,13 @@ def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: P
         if store.has_scene(scene_id, parameters, run.code_version):
             continue
         with run.dataset.open_scene(scene_id) as reader:
-            store.write_scene(scene_id, {radar: scene_masks(reader, radar, "labels", progress=False)
-                                         for radar in reader.sensors("radar")})
+            view = split.labelled_view(reader)
+            masks = {}
+            for radar in reader.sensors("radar"):
+                timestamps, targets = scene_masks(view, radar, "labels", progress=False)
+                targets[~split.is_labelled(scene_id, timestamps)] = UNCERTAIN
+                masks[radar] = (timestamps, targets)
+            store.write_scene(scene_id, masks)
 
 
 # --- inputs --------------------------------------------------------------------------------------
@@ -193,10 +213,16 @@ def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
 # --- training ------------------------------------------------------------------------------------
 
 
-def _frames(run: RunContext, scenes: list[str], store_dir: Path):
+def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupervisedSplit | None = None):
+    """Training samples (windows and the mask of their newest cube) of ``scenes`` from a mask store.
+
+    With ``split``, only the samples whose newest cube lies in a labelled segment (the manual-label
+    phases); without, every sample (pretraining on automatic labels). The windows' older maps may
+    come from outside the segments: they are radar data, not labels.
+    """
     from torch.utils.data import ConcatDataset
 
-    from zendar_baselines.cnn.mask_frames import MaskFrames
+    from zendar_baselines.cnn.mask_frames import MaskFrames, MaskFrameSubset
 
     store = MaskStore.open(store_dir, run.dataset)
     parts = []
@@ -208,7 +234,18 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path):
                 if not np.array_equal(timestamps, reader.timestamps(f"radar/{radar}")):
                     raise ZendarError(f"{store_dir}: the masks of {scene_id} {radar} do not match the dataset's cube "
                                       "times; the store was made from another dataset")
-                parts.append(MaskFrames(scene_maps(reader, radar, run.inputs_dir), targets, window=run.config.window))
+                maps = scene_maps(reader, radar, run.inputs_dir)
+                if split is None:
+                    parts.append(MaskFrames(maps, targets, window=run.config.window))
+                    continue
+                # Sample i's target is the mask of cube i + K - 1.
+                newest = timestamps  # sample i is the window ending at cube i (the first windows padded)
+                chosen = np.flatnonzero(split.is_labelled(scene_id, newest))
+                split.check_manual_label_times(scene_id, newest[chosen])
+                if chosen.size:
+                    parts.append(MaskFrameSubset(maps, targets, run.config.window, chosen))
+    if split is not None and not parts:
+        raise ZendarError(f"{store_dir}: no training sample of {scenes} has its newest cube in a labelled segment")
     return ConcatDataset(parts)
 
 
@@ -227,7 +264,7 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
 
     config, split = run.config, labels.split
     split.check_manual_label_use(split.labelled)
-    labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR)
+    labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR, split)
     in_channels = labelled.datasets[0].in_channels
     labelled, validation, validation_record = validation_frames(run, labels, labelled)
 

@@ -86,7 +86,10 @@ class MaskFrames(Dataset):
         """
         if not -len(self) <= index < len(self):
             raise IndexError(f"MaskFrames index {index} out of range for {len(self)} samples")
-        index = index % len(self)
+        return self._sample(index % len(self))
+
+    def _sample(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Sample ``index`` (``0 <= index < N``): the window ending at map ``index`` and that map's mask."""
         target = np.array(self.targets[index], dtype=MASK_DTYPE)
         if target.max(initial=0) > UNCERTAIN:
             raise ZendarError(
@@ -100,6 +103,51 @@ class MaskFrames(Dataset):
         background = moving = 0
         for start in range(0, self.targets.shape[0], 256):
             block = np.asarray(self.targets[start : start + 256])
+            background += int(np.count_nonzero(block == BACKGROUND))
+            moving += int(np.count_nonzero(block == MOVING))
+        return background, moving
+
+
+class MaskFrameSubset(MaskFrames):
+    """Some of the samples of a :class:`MaskFrames`: those whose mask is a target to train on.
+
+    Parameters
+    ----------
+    inputs, targets, window
+        As :class:`MaskFrames`.
+    samples : sequence of int
+        Indices of the samples kept (``0 <= i < N``: sample ``i`` is the window ending at map ``i``), in
+        the order they are served.
+
+    Raises
+    ------
+    ZendarError
+        As :class:`MaskFrames`, and for a sample index out of range.
+    """
+
+    def __init__(self, inputs: np.ndarray | str | os.PathLike, targets: np.ndarray | str | os.PathLike, window: int,
+                 samples) -> None:
+        super().__init__(inputs, targets, window)
+        self.samples = np.asarray(samples, np.int64).reshape(-1)
+        n_all = self.inputs.shape[0]
+        if self.samples.size and (self.samples.min() < 0 or self.samples.max() >= n_all):
+            raise ZendarError(f"MaskFrameSubset: sample indices must lie in [0, {n_all}), found {self.samples.min()} .. "
+                              f"{self.samples.max()}")
+
+    def __len__(self) -> int:
+        return int(self.samples.size)
+
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Kept sample ``index``: :meth:`MaskFrames.__getitem__` of ``samples[index]``."""
+        if not -len(self) <= index < len(self):
+            raise IndexError(f"MaskFrameSubset index {index} out of range for {len(self)} samples")
+        return self._sample(int(self.samples[index]))
+
+    def class_counts(self) -> tuple[int, int]:
+        """``(background cells, moving cells)`` over the kept samples' masks (uncertain cells left out)."""
+        background = moving = 0
+        for start in range(0, self.samples.size, 256):
+            block = np.asarray(self.targets[self.samples[start : start + 256]])
             background += int(np.count_nonzero(block == BACKGROUND))
             moving += int(np.count_nonzero(block == MOVING))
         return background, moving
