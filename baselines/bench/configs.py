@@ -110,7 +110,7 @@ CONFIGS: dict[str, BenchConfig] = {
         width_scale=0.125,
         pretrain=Schedule(lr=1e-3, batch_size=16, epochs=4, patience=2),
         finetune=Schedule(lr=3e-4, batch_size=16, epochs=20, patience=3),
-        supervised=Schedule(lr=1e-3, batch_size=16, epochs=36, patience=3),
+        supervised=Schedule(lr=1e-3, batch_size=16, epochs=60, patience=3),
         seeds=3,
     ),
     "tiny": BenchConfig(

@@ -143,7 +143,7 @@ def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Pat
     label outside the labelled segments shapes a mask, and none reaches training.
     """
     split.check_manual_label_use(split.labelled)
-    _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks")
+    _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks", split)
 
 
 def write_validation_masks(run: RunContext, step_dir: Path) -> None:
@@ -165,18 +165,22 @@ def write_validation_masks(run: RunContext, step_dir: Path) -> None:
     _write_manual_label_masks(run, scene_ids, step_dir, "validation masks")
 
 
-def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: Path, description: str) -> None:
+def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: Path, description: str,
+                              split: SemiSupervisedSplit | None = None) -> None:
+    """Manual-label masks of ``scene_ids`` into a store in ``step_dir``; with ``split``, of its labelled
+    segments only (:func:`write_label_masks`)."""
     parameters = {**mask_parameters(), "kind": "labels"}
     store = MaskStore.create(step_dir / STORE_DIR, run.dataset, parameters, code_version=run.code_version)
     for scene_id in tqdm(scene_ids, desc=description, unit="scene"):
         if store.has_scene(scene_id, parameters, run.code_version):
             continue
         with run.dataset.open_scene(scene_id) as reader:
-            view = split.labelled_view(reader)
+            view = reader if split is None else split.labelled_view(reader)
             masks = {}
             for radar in reader.sensors("radar"):
                 timestamps, targets = scene_masks(view, radar, "labels", progress=False)
-                targets[~split.is_labelled(scene_id, timestamps)] = UNCERTAIN
+                if split is not None:
+                    targets[~split.is_labelled(scene_id, timestamps)] = UNCERTAIN
                 masks[radar] = (timestamps, targets)
             store.write_scene(scene_id, masks)
 
@@ -238,10 +242,9 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupe
                 if split is None:
                     parts.append(MaskFrames(maps, targets, window=run.config.window))
                     continue
-                # Sample i's target is the mask of cube i + K - 1.
-                newest = timestamps  # sample i is the window ending at cube i (the first windows padded)
-                chosen = np.flatnonzero(split.is_labelled(scene_id, newest))
-                split.check_manual_label_times(scene_id, newest[chosen])
+                # Sample i is the window ending at cube i (the first windows padded): its target is cube i's mask.
+                chosen = np.flatnonzero(split.is_labelled(scene_id, timestamps))
+                split.check_manual_label_times(scene_id, timestamps[chosen])
                 if chosen.size:
                     parts.append(MaskFrameSubset(maps, targets, run.config.window, chosen))
     if split is not None and not parts:

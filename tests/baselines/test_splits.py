@@ -387,7 +387,6 @@ def test_supervised_samples_are_the_labelled_cubes_pretraining_sees_all(run: Run
     split = make_split(run.dataset, 0.4, seed=2, frames_per_segment=3)
     write_label_masks(run, split, tmp_path)
     store_dir = tmp_path / STORE_DIR
-    window = run.config.window
     labelled = _frames(run, list(split.labelled), store_dir, split)
     everything = _frames(run, list(split.labelled), store_dir)
     store = MaskStore.open(store_dir, run.dataset)
@@ -396,7 +395,7 @@ def test_supervised_samples_are_the_labelled_cubes_pretraining_sees_all(run: Run
     for scene_id in split.labelled:
         for radar, (timestamps, masks) in sorted(store.scene(scene_id).items(),
                                                  key=lambda item: run.dataset.open_scene(scene_id).sensors("radar").index(item[0])):
-            newest = np.arange(window - 1, timestamps.size)
+            newest = np.arange(timestamps.size)  # one sample per cube: the first windows are padded
             n_all += newest.size
             expected_targets += [masks[i] for i in newest if split.is_labelled(scene_id, timestamps[i : i + 1])[0]]
     assert len(everything) == n_all and 0 < len(labelled) == len(expected_targets) < n_all
@@ -409,16 +408,16 @@ def test_mask_frame_subset_serves_and_counts_the_kept_samples() -> None:
     inputs = np.arange(5 * 1 * 2 * 2, dtype=np.float32).reshape(5, 1, 2, 2)
     targets = np.array([[[0, 0], [0, 0]], [[1, 0], [0, 0]], [[1, 1], [0, 2]], [[2, 2], [2, 2]], [[1, 1], [1, 0]]], np.uint8)
     whole = MaskFrames(inputs, targets, window=2)
-    part = MaskFrameSubset(inputs, targets, 2, [3, 1])
+    part = MaskFrameSubset(inputs, targets, 2, [4, 2])
     assert len(part) == 2 and part.in_channels == 2
-    for k, i in enumerate([3, 1]):
+    for k, i in enumerate([4, 2]):
         np.testing.assert_array_equal(part[k][0].numpy(), whole[i][0].numpy())
-        np.testing.assert_array_equal(part[k][1].numpy(), targets[i + 1])
+        np.testing.assert_array_equal(part[k][1].numpy(), targets[i])  # sample i ends at frame i
     assert part.class_counts() == (2, 5)  # frame 4: 1 background, 3 moving; frame 2: 1 and 2 (and 1 uncertain)
     with pytest.raises(IndexError):
         part[2]
-    with pytest.raises(ZendarError, match=r"sample indices must lie in \[0, 4\)"):
-        MaskFrameSubset(inputs, targets, 2, [4])
+    with pytest.raises(ZendarError, match=r"sample indices must lie in \[0, 5\)"):
+        MaskFrameSubset(inputs, targets, 2, [5])
 
 
 def test_bench_stops_with_exit_2_when_the_labelled_part_has_too_few_cars(dataset: Path, tmp_path: Path, monkeypatch,
