@@ -35,9 +35,9 @@ FITTED = ("threshold_db", "cluster_eps_m", "centre_offset_m", "cluster_score")
 
 
 def fitting_scenes(run: RunContext, split: SemiSupervisedSplit) -> tuple[list[str], list[str]]:
-    """``(fit, check)`` scene ids: the labelled part of the training split, and the validation split.
-
-    The one place the chain's fit reads the semi-supervised split.
+    """``(fit, check)`` scene ids: the scenes of the training split with a labelled segment (whose
+    labelled segments alone the fit reads: :func:`write_chain_fit` passes the split on), and the
+    validation split.
     """
     split.check_manual_label_use(split.labelled)
     return list(split.labelled), run.dataset.scene_ids("val")
@@ -58,7 +58,7 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
         As :func:`zendar_baselines.classical.chain_fit.fit_chain` (nothing is written then).
     """
     fit_ids, check_ids = fitting_scenes(run, split)
-    params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector)
+    params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split)
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
               "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
     write_json_atomic(step_dir / CHAIN_FIT_FILE, {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "detector": detector,

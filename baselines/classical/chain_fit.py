@@ -66,6 +66,8 @@ from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
 
+from zendar_baselines.labels.splits import SemiSupervisedSplit
+
 # A cluster counts towards the offset when a label lies this close to its uncorrected centre: a car
 # length, so that clusters short by half a car's depth (and the lag of a cube up to 0.1 s older than
 # the frame) are not cut off, while neighbouring cars (lanes 3.5 m apart) rarely are taken.
@@ -152,19 +154,28 @@ class LabelledFrames:
 
 
 def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsFor, params: ChainParams | None = None,
-                    progress: bool = True, description: str = "chain_fit") -> LabelledFrames:
+                    progress: bool = True, description: str = "chain_fit",
+                    split: SemiSupervisedSplit | None = None) -> LabelledFrames:
     """Run the chain up to the SAR values on every labelled frame of ``scene_ids`` (scenes without
-    labels are skipped), with the cells ``cells_for`` gives (:func:`cfar_cells_for`, or a CNN's peaks)."""
+    labels are skipped), with the cells ``cells_for`` gives (:func:`cfar_cells_for`, or a CNN's peaks).
+
+    With ``split``, only the frames in its labelled segments are taken, their labels read through
+    :meth:`~zendar_baselines.labels.splits.SemiSupervisedSplit.labelled_view` (the split's guard: no
+    manual label outside the labelled segments is read).
+    """
     params = ChainParams() if params is None else params
     frames = LabelledFrames({}, {}, {}, {}, {})
     for scene_id in tqdm(scene_ids, desc=description, unit="scene", disable=not progress):
-        with index.open_scene(scene_id) as reader:
+        with index.open_scene(scene_id) as opened:
+            reader = opened if split is None else split.labelled_view(opened)
             labels = reader.labels()
             if labels is None:
                 continue
             poses = reader.ego_poses()
             frames.scene_frames[scene_id] = []
             for frame_ns, found in frame_cube_points(reader, cells_for(reader), params, poses=poses):
+                if split is not None and not split.is_labelled(scene_id, np.array([frame_ns], np.int64))[0]:
+                    continue
                 boxes = LabelBoxes.of_frame(labels, frame_ns)
                 fid = frame_id(scene_id, frame_ns)
                 frames.on_car[fid] = np.concatenate([np.zeros(0, bool)] + [
@@ -298,6 +309,7 @@ def _counts(frames: LabelledFrames) -> dict[str, Any]:
 def fit_chain(
     index: DatasetIndex, fit_scene_ids: list[str], check_scene_ids: list[str], cells_for: CellsFor,
     base: ChainParams | None = None, *, detector: str = "CFAR", progress: bool = True,
+    split: SemiSupervisedSplit | None = None,
 ) -> tuple[ChainParams, dict[str, Any]]:
     """Fit the SAR threshold, cluster radius and centre offset on one detector's points (module docstring).
 
@@ -318,6 +330,9 @@ def fit_chain(
         Named in messages and the summary.
     progress : bool
         Show a progress bar over the scenes.
+    split : SemiSupervisedSplit, optional
+        When given, the fitting scenes' frames outside its labelled segments are left out and their
+        labels never read (:func:`labelled_frames`); the check's scenes are read whole.
 
     Returns
     -------
@@ -340,7 +355,7 @@ def fit_chain(
         raise ZendarError(f"{index.root}: the detection chain is fitted on training labels, never on split "
                           f"{GUARDED_SPLIT!r} (scenes {guarded})")
     base = ChainParams() if base is None else base
-    frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})")
+    frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})", split)
     if not frames.points:
         raise ZendarError(f"{index.root}: scenes {list(fit_scene_ids)} have no labelled frame to fit the detection chain on")
     check = labelled_frames(index, list(check_scene_ids), cells_for, base, progress, f"chain check ({detector})")

@@ -30,6 +30,7 @@ from zendar_baselines.classical.chain_fit import (
     fit_chain,
     fit_chain_params,
     fit_on_frames,
+    labelled_frames,
 )
 from zendar_baselines.cnn.maps import log_power_maps
 from zendar_baselines.labels.splits import make_split
@@ -173,3 +174,37 @@ def test_every_cube_of_a_scene_gets_the_models_peaks_the_first_ones_included(tin
         assert n_frames == len(reader.timestamps("sar/" + reader.sensors("sar")[0]))
     # Each radar's first cubes (no full window of 3 behind them) have their peaks too.
     assert all(n_cells[radar, k] > 0 for radar in maps for k in (0, 1))
+
+
+def test_the_fit_reads_the_labelled_segments_alone(tiny_root, monkeypatch):
+    """With the semi-supervised split, only frames of labelled segments enter the fit, and no manual
+    label outside them is read: labels outside the segments moved far away change nothing."""
+    index = open_dataset(str(tiny_root))
+    split = make_split(index, 0.5, seed=0, frames_per_segment=3)
+    scenes = list(split.labelled)
+    whole = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False)
+    segments = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, split=split)
+    assert 0 < len(segments.points) < len(whole.points)
+    for scene_id, frame_ids in segments.scene_frames.items():
+        stamps = np.array([int(fid.rsplit("/", 1)[1]) for fid in frame_ids], np.int64)
+        assert split.is_labelled(scene_id, stamps).all()
+        for fid in frame_ids:
+            np.testing.assert_array_equal(segments.labels[fid], whole.labels[fid])
+            np.testing.assert_array_equal(segments.on_car[fid], whole.on_car[fid])
+
+    opened = index.open_scene
+
+    def shifted_outside(scene_id, **kwargs):
+        reader = opened(scene_id, **kwargs)
+        labels = reader.labels()
+        outside = ~split.is_labelled(scene_id, labels["timestamp_ns"])
+        moved = {name: values.copy() for name, values in labels.items()}
+        moved["x"][outside] += 1000.0
+        monkeypatch.setattr(reader, "labels", lambda: moved)
+        return reader
+
+    monkeypatch.setattr(index, "open_scene", shifted_outside)
+    again = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, split=split)
+    assert again.scene_frames == segments.scene_frames
+    for fid in segments.points:
+        np.testing.assert_array_equal(again.labels[fid], segments.labels[fid])
