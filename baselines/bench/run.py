@@ -197,7 +197,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     problem = next(iter(verdicts.values()))["resampling"].get("problem")
     if problem:
         say(f"[claims] {problem}")
-    cars = split_car_counts(context.dataset, split.labelled)
+    cars = split_car_counts(context.dataset, split)
     chain_fits = {"cfar": chain_fit_record(out / CFAR_STEP)}
     chain_fits.update({row.key: [chain_fit_record(out / "rows" / row.key / f"seed-{seed}") for seed in range(seeds)]
                        for row in rows if row.supervised})

@@ -80,8 +80,8 @@ def test_quick_bench_writes_table_one(quick_run):
     frames = ground_truth_frames(results["dataset"]["root"], "test")
     within = {(f.rpartition("/")[0], car["track_id"]) for f, cars in frames.items() for car in cars
               if (car["x"] ** 2 + car["y"] ** 2) ** 0.5 < 60.0}
-    test_cars = results["distinct_cars"]["test"]["all"]
-    assert test_cars["cars"] == len(within) == sum(test_cars["by_kind"].values())
+    test_cars = results["distinct_cars"]["test"]
+    assert test_cars["cars"]["all"] == len(within) == sum(test_cars["by_kind"]["all"].values())
     table = (out / "table.md").read_text()
     assert "| claim | pair | band | difference [95 % interval] | verdict |" in table
     assert "### Distinct labelled cars" in table

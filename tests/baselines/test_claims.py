@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from zendar_baselines.bench.car_counts import LabelRows, distinct_cars, markdown_car_counts, motion_kind
+from zendar_baselines.bench.car_counts import markdown_car_counts
 from zendar_baselines.bench.claims import claim_verdicts, markdown_claims
 from zendar_baselines.bench.results_table import Row
+
 from zendar_dataset.errors import ZendarError
+from zendar_dataset.eval.car_counts import (
+    SceneLabels,
+    count_distinct_cars,
+    track_motion_kinds,
+)
 from zendar_dataset.eval.evaluate import matched_detections
 
 NS = 1_000_000_000
@@ -108,37 +113,39 @@ def _heading(deg):
     return np.radians(np.asarray(deg, dtype=float))
 
 
+def _kind(car_deg, ego_yaw_rad):
+    """The kind of one car labelled over 30 frames with relative headings ``car_deg``."""
+    labels = {"timestamp_ns": np.arange(30) * NS // 10, "track_id": np.ones(30, np.int64), "yaw": _heading(car_deg)}
+    return track_motion_kinds(labels, ego_yaw_rad)[1]
+
+
 def test_kinds_of_motion_from_headings():
     steps = np.linspace(0.0, 1.0, 30)
     straight_ego = np.zeros(30)
-    assert motion_kind(_heading(5 * np.sin(6 * steps)), straight_ego) == "ahead"
-    assert motion_kind(_heading(178 + 4 * steps), straight_ego) == "oncoming"  # wraps through ±180°
-    assert motion_kind(_heading(-90 + 0 * steps), straight_ego) == "crossing"
+    assert _kind(5 * np.sin(6 * steps), straight_ego) == "ahead"
+    assert _kind(178 + 4 * steps, straight_ego) == "oncoming"  # wraps through ±180°
+    assert _kind(-90 + 0 * steps, straight_ego) == "crossing"
     # Out of a cross street into the oncoming lane: course 90° -> 180° over ground.
-    assert motion_kind(_heading(90 + 90 * steps), straight_ego) == "turning"
+    assert _kind(90 + 90 * steps, straight_ego) == "turning"
     # A straight crossing car seen while the ego turns 60° left: its relative heading falls from 90° to
     # 30°, its course over ground stays 90°: crossing, not turning.
     ego = _heading(60 * steps)
-    assert motion_kind(_heading(90 - 60 * steps), ego) == "crossing"
+    assert _kind(90 - 60 * steps, ego) == "crossing"
     # A car ahead following the ego through the same turn turns over ground with it.
-    assert motion_kind(_heading(0 * steps), ego) == "turning"
+    assert _kind(0 * steps, ego) == "turning"
 
 
-def test_distinct_cars_per_band_count_each_car_of_each_scene_once():
-    # Scene 0, track 1: near then mid (two frames each); scene 1, track 1 (another car): far;
-    # scene 0, track 2: always beyond 60 m (in no band).
-    rows = LabelRows(
-        scene_ids=("a", "b"),
-        scene=np.array([0, 0, 0, 0, 1, 0]),
-        timestamp_ns=np.array([0, 1, 2, 3, 0, 0]) * NS // 10,
-        track_id=np.array([1, 1, 1, 1, 1, 2]),
-        x_m=np.array([5.0, 14.0, 16.0, 29.0, 50.0, 70.0]),
-        y_m=np.zeros(6),
-        yaw_rad=np.array([0.0, 0.0, 0.0, 0.0, np.pi, np.pi / 2]),
-        ego_yaw_rad=np.zeros(6),
-    )
-    counts = distinct_cars(rows)
-    assert {band: c["cars"] for band, c in counts.items()} == {"near": 1, "mid": 1, "far": 1, "all": 2}
-    assert counts["all"]["by_kind"] == {"ahead": 1, "oncoming": 1, "crossing": 0, "turning": 0}
-    assert distinct_cars(rows.of_scenes(["b"]))["all"]["cars"] == 1
-    assert "| test | 1 (1/0/0/0) | 1 (1/0/0/0) | 1 (0/1/0/0) | 2 (1/1/0/0) |" in markdown_car_counts({"test": counts})
+def test_distinct_cars_per_band_count_each_car_of_each_scene_once_and_tabulate():
+    # Scene a, track 1: near then mid (two frames each); scene b, track 1 (another car): far;
+    # scene a, track 2: always beyond 60 m (in no band).
+    a = SceneLabels("a", {"timestamp_ns": np.array([0, 1, 2, 3, 0]) * NS // 10, "track_id": np.array([1, 1, 1, 1, 2]),
+                          "x": np.array([5.0, 14.0, 16.0, 29.0, 70.0]), "y": np.zeros(5),
+                          "yaw": np.array([0.0, 0.0, 0.0, 0.0, np.pi / 2])}, np.zeros(5))
+    b = SceneLabels("b", {"timestamp_ns": np.array([0]), "track_id": np.array([1]), "x": np.array([50.0]),
+                          "y": np.zeros(1), "yaw": np.array([np.pi])}, np.zeros(1))
+    counts = count_distinct_cars([a, b])
+    assert counts.cars == {"near": 1, "mid": 1, "far": 1, "all": 2}
+    assert counts.by_kind["all"] == {"ahead": 1, "oncoming": 1}
+    assert count_distinct_cars([b]).cars["all"] == 1
+    table = markdown_car_counts({"test": counts.to_json()})
+    assert "| test | 1 (1/0/0/0) | 1 (1/0/0/0) | 1 (0/1/0/0) | 2 (1/1/0/0) |" in table
