@@ -1,4 +1,5 @@
-"""Benchmark configurations: ``paper`` (the paper's schedule, §4.1–4.2) and ``demo`` / ``tiny`` for CPUs.
+"""Benchmark configurations: ``paper`` (the paper's schedule, §4.1–4.2), ``gpu`` for one GPU, and
+``demo`` / ``tiny`` for CPUs.
 
 The paper trains with Adam: pretraining on automatic labels at lr 1e-4, batch 8, 100 epochs;
 fine-tuning on manual labels at lr 1e-5, 80 epochs. It does not give a schedule for the
@@ -9,7 +10,10 @@ cannot afford: channel widths (``width_scale``), epochs and the simulated datase
 
 Every phase keeps the epoch of least validation loss (the validation scenes' manual-label masks);
 ``demo`` and ``tiny`` also stop a phase after ``patience`` epochs without a lower validation loss, so
-their epochs are a ceiling, and their learning curves (``curves.png``) flatten before it. Budgets
+their epochs are a ceiling, and their learning curves (``curves.png``) flatten before it. ``gpu`` is the ``demo`` procedure at the
+published widths (``width_scale`` 1.0) on four times the ``demo`` dataset with longer schedules,
+sized to finish within an hour on one H100/H200 (``benchmarks/bench_paper_projection.py --config
+gpu`` projects its training time from counted FLOPs). Budgets
 compare in windows seen (one window = one gradient sample): with L labelled windows and about
 L / ``labelled_fraction`` windows in every training scene, a pretrained row sees at most
 ``pretrain.epochs * L / labelled_fraction + finetune.epochs * L`` windows and a supervised-only row
@@ -111,6 +115,15 @@ CONFIGS: dict[str, BenchConfig] = {
         pretrain=Schedule(lr=1e-3, batch_size=16, epochs=4, patience=2),
         finetune=Schedule(lr=3e-4, batch_size=16, epochs=20, patience=3),
         supervised=Schedule(lr=1e-3, batch_size=16, epochs=60, patience=3),
+        seeds=3,
+    ),
+    "gpu": BenchConfig(
+        name="gpu", sim_profile="demo-short", n_scenes=240, sim_seed=0, labelled_fraction=0.1, min_labelled_cars=10,
+        window=3,
+        width_scale=1.0,
+        pretrain=Schedule(lr=1e-3, batch_size=16, epochs=20, patience=4),
+        finetune=Schedule(lr=3e-4, batch_size=16, epochs=40, patience=5),
+        supervised=Schedule(lr=1e-3, batch_size=16, epochs=240, patience=5),
         seeds=3,
     ),
     "tiny": BenchConfig(

@@ -128,7 +128,9 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
     split_dir, split_key, _ = run.step("split", base_inputs, lambda d: steps.write_semi_supervised_split(context, d))
     split = steps.read_semi_supervised_split(context, split_dir)
-    say(f"[split] {len(split.labelled)} labelled / {len(split.unlabelled)} unlabelled training scenes")
+    n_segments = sum(len(segments) for segments in split.labelled_segments.values())
+    say(f"[split] {n_segments} labelled time segments in {len(split.labelled)} training scenes "
+        f"({len(split.unlabelled)} training scenes without one)")
 
     auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "split": split_key},
                                      lambda d: steps.write_auto_labels(dataset, [*split.labelled, *split.unlabelled], d))

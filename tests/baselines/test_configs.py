@@ -7,7 +7,7 @@ import pytest
 from zendar_baselines.bench.configs import get_config
 
 
-@pytest.mark.parametrize("name", ["demo", "tiny"])
+@pytest.mark.parametrize("name", ["demo", "gpu", "tiny"])
 def test_supervised_rows_may_see_as_many_windows_as_pretraining_plus_fine_tuning(name):
     config = get_config(name)
     labelled_windows = 100.0  # any L: every training scene holds about L / labelled_fraction windows
@@ -21,7 +21,7 @@ def test_supervised_rows_may_see_as_many_windows_as_pretraining_plus_fine_tuning
     assert config.supervised.patience == config.finetune.patience
 
 
-@pytest.mark.parametrize("name", ["demo", "tiny"])
+@pytest.mark.parametrize("name", ["demo", "gpu", "tiny"])
 def test_cpu_configs_stop_early_on_the_validation_loss(name):
     config = get_config(name)
     for schedule in (config.pretrain, config.finetune, config.supervised):
