@@ -25,13 +25,7 @@ EXPECTED_LAYERS = {"fpn-resnet34": 34, "densenet-37": 37, "densenet-67": 67}
 UNCOUNTED_PARTS = (".downsample.", "fpn.", "head.", "zoom.")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """One intra-op thread: on a shared 2-core machine torch's default threads oversubscribe it ~10x."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def weighted_layers(model: nn.Module) -> int:

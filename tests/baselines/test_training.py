@@ -32,13 +32,7 @@ from tests.baselines.tiny_mask_model import TinyMaskNet, moving_target_task
 SCHEDULE = Schedule(lr=1e-2, batch_size=8, epochs=2)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    # The models here are tiny: a second thread only adds contention on a busy machine.
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

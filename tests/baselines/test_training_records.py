@@ -9,7 +9,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import torch
 from torch.utils.data import ConcatDataset
 
 from zendar_dataset.errors import ZendarError
@@ -23,12 +22,7 @@ from zendar_baselines.cnn.training import seed_everything, train
 from tests.baselines.tiny_mask_model import TinyMaskNet, moving_target_task
 
 
-@pytest.fixture(autouse=True, scope="module")
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 class _Splits:
