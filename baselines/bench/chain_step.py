@@ -44,7 +44,7 @@ def fitting_scenes(run: RunContext, split: SemiSupervisedSplit) -> tuple[list[st
 
 
 def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, cells_for: CellsFor, base: ChainParams,
-                    step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
+                    step_dir: Path, threshold_by: str = "points") -> tuple[ChainParams, dict[str, Any]]:
     """Fit the chain on ``detector``'s cells (``cells_for``) and write ``step_dir / chain_fit.json``.
 
     Returns
@@ -58,7 +58,8 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
         As :func:`zendar_baselines.classical.chain_fit.fit_chain` (nothing is written then).
     """
     fit_ids, check_ids = fitting_scenes(run, split)
-    params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split)
+    params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split,
+                                threshold_by=threshold_by)
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
               "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
     write_json_atomic(step_dir / CHAIN_FIT_FILE, {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "detector": detector,
@@ -84,11 +85,13 @@ def cfar_chain_step(directory: RunDirectory, run: RunContext, split: SemiSupervi
 
 def write_cnn_chain_fit(run: RunContext, split: SemiSupervisedSplit, checkpoint: Path, detector: str,
                         step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
-    """A CNN row seed's fit, on the peaks of the model in ``checkpoint``."""
+    """A CNN row seed's fit, on the peaks of the model in ``checkpoint``, its SAR threshold chosen by the
+    detections (:func:`zendar_baselines.classical.chain_fit.fit_on_frames`)."""
     from zendar_baselines.bench.scoring import CNN_CHAIN, load_model, model_cells_for
 
     model, _ = load_model(checkpoint, run.device)
-    return write_chain_fit(run, split, detector, model_cells_for(model, run.config.window, run.device), CNN_CHAIN, step_dir)
+    return write_chain_fit(run, split, detector, model_cells_for(model, run.config.window, run.device), CNN_CHAIN, step_dir,
+                           threshold_by="detections")
 
 
 def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:

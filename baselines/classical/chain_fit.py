@@ -74,6 +74,12 @@ from zendar_baselines.labels.splits import SemiSupervisedSplit
 OFFSET_MATCH_RADIUS_M = 4.0
 # The SAR values of CFAR points on the demo's training split span about -25 to 65 dB (1st to 99th percentile).
 THRESHOLD_GRID_DB = np.arange(-40.0, 70.0 + 0.5, 1.0)
+#: SAR thresholds tried (dB) when the threshold is chosen by the detections (``threshold_by="detections"``):
+#: the span of the values of CFAR and CNN points on the demo config (about -25 to 65 dB) and beyond,
+#: where the test lets every point with a SAR reading through.
+DETECTION_THRESHOLD_GRID_DB = np.arange(-20.0, 100.0 + 0.5, 4.0)
+#: How the SAR threshold is chosen (:func:`fit_on_frames`).
+THRESHOLD_CRITERIA = ("points", "detections")
 #: DBSCAN radii tried (metres), around :data:`zendar_dataset.detection.CLUSTER_EPS_M`.
 CLUSTER_EPS_GRID_M = (1.0, 1.5, 2.0, 2.5, 3.0)
 #: Without labelled validation scenes, this share of each fitting scene's labelled frames (its last
@@ -309,7 +315,7 @@ def _counts(frames: LabelledFrames) -> dict[str, Any]:
 def fit_chain(
     index: DatasetIndex, fit_scene_ids: list[str], check_scene_ids: list[str], cells_for: CellsFor,
     base: ChainParams | None = None, *, detector: str = "CFAR", progress: bool = True,
-    split: SemiSupervisedSplit | None = None,
+    split: SemiSupervisedSplit | None = None, threshold_by: str = "points",
 ) -> tuple[ChainParams, dict[str, Any]]:
     """Fit the SAR threshold, cluster radius and centre offset on one detector's points (module docstring).
 
@@ -333,6 +339,8 @@ def fit_chain(
     split : SemiSupervisedSplit, optional
         When given, the fitting scenes' frames outside its labelled segments are left out and their
         labels never read (:func:`labelled_frames`); the check's scenes are read whole.
+    threshold_by : {"points", "detections"}
+        How the SAR threshold is chosen (:func:`fit_on_frames`).
 
     Returns
     -------
@@ -365,7 +373,7 @@ def fit_chain(
         frames, check = frames.held_out()
         print(f"warning: {index.root}: no labelled validation scene; the {detector} chain fit is checked on the last "
               f"{HELD_OUT_SHARE:.0%} of each fitting scene's frames, held out of the fit", file=sys.stderr, flush=True)
-    params, fit = fit_on_frames(frames, base, detector, str(index.root))
+    params, fit = fit_on_frames(frames, base, detector, str(index.root), threshold_by)
     check_separation = point_separation(check)
     summary: dict[str, Any] = {
         "detector": detector, "threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
@@ -377,40 +385,65 @@ def fit_chain(
     return params, summary
 
 
-def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CFAR", where: str = "") -> tuple[ChainParams, dict[str, Any]]:
+def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CFAR", where: str = "",
+                  threshold_by: str = "points") -> tuple[ChainParams, dict[str, Any]]:
     """The constants fitted on ``frames`` (module docstring, steps 1 to 3) and the fit's figures.
+
+    Parameters
+    ----------
+    threshold_by : {"points", "detections"}
+        ``"points"``: the SAR threshold of the largest F1 score on the points (step 1), then the radius
+        by the chain's AP. ``"detections"``: threshold and radius together, the pair of
+        :data:`DETECTION_THRESHOLD_GRID_DB` x :data:`CLUSTER_EPS_GRID_M` (and the F1 threshold) whose
+        chain AP (all bands) on ``frames`` is highest — for a CNN's peaks, which the model has
+        already judged moving: among them the SAR value separates cars from the rest barely better
+        than chance (ROC AUC about 0.5 on the demo config), so a point-level threshold lands anywhere,
+        from one that passes every point to one that drops every car.
 
     Returns
     -------
     params : ChainParams
         ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
     fit : dict
-        Counts, ``point_separation`` (:func:`separation_of`), ``radius_grid`` (each
-        radius with its offset and AP) and the chain's ``ap`` on ``frames`` with ``params``.
+        Counts, ``point_separation`` (:func:`separation_of`), ``threshold_by``, ``radius_grid`` (each
+        radius with its offset and AP at the chosen threshold) and the chain's ``ap`` on ``frames``
+        with ``params``.
 
     Raises
     ------
     ZendarError
-        When no SAR threshold separates the points on labelled cars from the others better than
-        chance (or every point, or none, is on a car); ``where`` and ``detector`` name the data.
+        For ``"points"``, when no SAR threshold separates the points on labelled cars from the others
+        better than chance (or every point, or none, is on a car); for ``"detections"``, when no
+        pair finds a labelled car; ``where`` and ``detector`` name the data.
     """
+    if threshold_by not in THRESHOLD_CRITERIA:
+        raise ZendarError(f"fit_on_frames: threshold_by must be one of {THRESHOLD_CRITERIA}, got {threshold_by!r}")
     counts = _counts(frames)
     separation = point_separation(frames)
-    if separation["youden_j"] is None or separation["youden_j"] <= 0.0:
+    if threshold_by == "points" and (separation["youden_j"] is None or separation["youden_j"] <= 0.0):
         raise ZendarError(
             f"{where}: no SAR threshold separates the {detector} points on labelled cars from the others "
             f"(scenes {counts['scenes']}: {counts['on_car_points']} of {counts['points']} points on cars, "
             f"ROC AUC {separation['auc']}); the SAR static-scene test cannot be fitted on these labels"
         )
-    sar = replace(base.sar, threshold_db=round(2.0 * separation["f1_threshold_db"]) / 2.0)
+    thresholds_db = [] if separation["f1_threshold_db"] is None else [round(2.0 * separation["f1_threshold_db"]) / 2.0]
+    if threshold_by == "detections":
+        thresholds_db += [t for t in DETECTION_THRESHOLD_GRID_DB.tolist() if t not in thresholds_db]
     grid = []
-    for eps_m in CLUSTER_EPS_GRID_M:
-        trial = _offset_for(frames, replace(base, sar=sar, cluster_eps_m=eps_m))
-        grid.append((trial, chain_ap(frames, trial)))
-    params, ap = max(grid, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])  # first (smaller) on a tie
-    return params, {**counts, "point_separation": separation, "ap": ap,
+    for threshold_db in thresholds_db:
+        for eps_m in CLUSTER_EPS_GRID_M:
+            trial = _offset_for(frames, replace(base, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m))
+            grid.append((trial, chain_ap(frames, trial)))
+    if not grid or max((-1.0 if a["all"] is None else a["all"]) for _, a in grid) <= 0.0:
+        raise ZendarError(
+            f"{where}: no SAR threshold and cluster radius let the {detector} chain find a labelled car "
+            f"(scenes {counts['scenes']}: {counts['on_car_points']} of {counts['points']} points on cars); "
+            "the chain cannot be fitted on these labels"
+        )
+    params, ap = max(grid, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])  # first on a tie
+    return params, {**counts, "point_separation": separation, "threshold_by": threshold_by, "ap": ap,
                     "radius_grid": [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": a["all"]}
-                                    for t, a in grid]}
+                                    for t, a in grid if t.sar.threshold_db == params.sar.threshold_db]}
 
 
 def fit_chain_params(

@@ -208,3 +208,22 @@ def test_the_fit_reads_the_labelled_segments_alone(tiny_root, monkeypatch):
     assert again.scene_frames == segments.scene_frames
     for fid in segments.points:
         np.testing.assert_array_equal(again.labels[fid], segments.labels[fid])
+
+
+def test_a_threshold_by_the_detections_keeps_the_cars_the_points_criterion_would_drop():
+    """CNN-like points: every point already moving, cars and clutter alike, the cars' SAR values spread
+    over the clutter's. F1 on the points cuts inside the cars' values and drops the car of some
+    frames; the threshold chosen by the chain's AP lets every car through."""
+    frames = _frames((8.0, 9.0), 30.0, n_frames=4)
+    for k, fid in enumerate(frames.points):
+        points = frames.points[fid]
+        car_db = 40.0 if k % 2 else 8.0  # half the frames' cars read as bright as the background
+        frames.points[fid] = FramePoints(points.points_xy, points.radar_xy, points.score,
+                                         np.array([car_db, car_db + 1.0, 30.0, 30.0]), points.dynamic)
+    by_points, fit_points = fit_on_frames(frames, ChainParams(), "CNN")
+    by_detections, fit_detections = fit_on_frames(frames, ChainParams(), "CNN", threshold_by="detections")
+    assert fit_points["threshold_by"] == "points" and fit_detections["threshold_by"] == "detections"
+    assert fit_points["ap"]["all"] < 1.0 <= fit_detections["ap"]["all"] + 1e-12
+    assert by_detections.sar.threshold_db > 41.0  # above every car's value: the test lets them through
+    with pytest.raises(ZendarError, match="threshold_by must be one of"):
+        fit_on_frames(frames, ChainParams(), threshold_by="votes")
