@@ -1,6 +1,6 @@
 """Command line of ``zendar-bench``.
 
-    zendar-bench [run] [--quick] [--config tiny|demo|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
+    zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
