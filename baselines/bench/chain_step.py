@@ -59,6 +59,7 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
     """
     fit_ids, check_ids = fitting_scenes(run, split)
     params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split,
+                                progress=run.progress,
                                 threshold_by=threshold_by)
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
               "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
@@ -108,11 +109,14 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
         if document["format"] != FORMAT_NAME or document["format_version"] != FORMAT_VERSION:
             raise KeyError("format")
         fitted = {name: document["fitted"][name] for name in FITTED}
+        # Not fitted: the SAR value's definition (False only in the ablation of the SNR subtraction).
+        subtract_rd_snr = document["parameters"]["sar"].get("subtract_rd_snr", True)
         summary = document["summary"]
     except (KeyError, TypeError) as exc:
         raise ZendarError(f"{path}: not a {FORMAT_NAME} file of version {FORMAT_VERSION} ({exc!r} missing)") from None
     base = ChainParams()
-    params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"]), cluster_eps_m=fitted["cluster_eps_m"],
+    params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"], subtract_rd_snr=subtract_rd_snr),
+                     cluster_eps_m=fitted["cluster_eps_m"],
                      centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"])
     return params, summary
 

@@ -165,26 +165,8 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
     ZendarError
         When the rows were not scored on the same frames.
     """
-    first = matched[rows[0].key]
-    for row in rows:
-        if matched[row.key].frame_ids != first.frame_ids:
-            raise ZendarError(f"row {row.key}: scored on other frames than row {rows[0].key}; paired "
-                              "comparisons need the same frames")
-    frame_unit, n_units = frame_units(first.frame_ids, first.evaluated_frame, block_s)
-    problem = too_few_resamples(n_units, f"test split, {block_s:g} s time blocks")
-    # Too few units: no resample at all, so every comparison keeps its difference and no interval.
-    weights = resample_weights(n_units, 0 if problem else n_resamples, seed)
-    aps = {}
-    for row in rows:
-        bands = matched[row.key].band_detections(frame_unit)
-        aps[row.key] = {band: resampled_ap(bands[band], weights) for band in RANGE_BANDS}
-    resampling = {
-        "unit": BOOTSTRAP_UNIT_BLOCK, "block_s": block_s, "n_units": n_units,
-        "distinct_resamples": distinct_resamples(n_units), "n_resamples": n_resamples, "seed": seed,
-        "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "first",
-    }
-    if problem:
-        resampling["problem"] = problem
+    aps, resampling = shared_resamples([row.key for row in rows], matched, block_s=block_s, n_resamples=n_resamples,
+                                       seed=seed)
     return {
         name: {"statement": STATEMENTS[name], "verdict": overall_verdict(comparisons), "resampling": resampling,
                "comparisons": [c.to_json() for c in comparisons]}
@@ -192,13 +174,56 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
     }
 
 
+def shared_resamples(keys: list[str], matched: Mapping[str, MatchedDetections], *, block_s: float = BLOCK_S,
+                     n_resamples: int = CLAIM_RESAMPLES, seed: int = CLAIM_SEED
+                     ) -> tuple[dict[str, dict[str, ResampledAP]], dict[str, Any]]:
+    """Each row's AP per band on all frames and in the same resamples of the test split's time blocks.
+
+    Returns
+    -------
+    aps, resampling
+        Key → band → :class:`ResampledAP`; and the resampling's record (``problem`` when the split
+        has too few blocks: then no resample is drawn and every interval is None).
+
+    Raises
+    ------
+    ZendarError
+        When the rows were not scored on the same frames.
+    """
+    first = matched[keys[0]]
+    for key in keys:
+        if matched[key].frame_ids != first.frame_ids:
+            raise ZendarError(f"row {key}: scored on other frames than row {keys[0]}; paired "
+                              "comparisons need the same frames")
+    frame_unit, n_units = frame_units(first.frame_ids, first.evaluated_frame, block_s)
+    problem = too_few_resamples(n_units, f"test split, {block_s:g} s time blocks")
+    # Too few units: no resample at all, so every comparison keeps its difference and no interval.
+    weights = resample_weights(n_units, 0 if problem else n_resamples, seed)
+    aps = {}
+    for key in keys:
+        bands = matched[key].band_detections(frame_unit)
+        aps[key] = {band: resampled_ap(bands[band], weights) for band in RANGE_BANDS}
+    resampling = {
+        "unit": BOOTSTRAP_UNIT_BLOCK, "block_s": block_s, "n_units": n_units,
+        "distinct_resamples": distinct_resamples(n_units), "n_resamples": n_resamples, "seed": seed,
+        "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "first",
+    }
+    if problem:
+        resampling["problem"] = problem
+    return aps, resampling
+
+
 def matched_first_seeds(run_path: Path, rows: list[Row], root: Path) -> dict[str, MatchedDetections]:
     """Row key → the evaluator's matching of ``rows/<key>/predictions.json`` (the first seed) on the test split."""
+    return matched_predictions({row.key: run_path / "rows" / row.key / "predictions.json" for row in rows}, root)
+
+
+def matched_predictions(paths: Mapping[str, Path], root: Path) -> dict[str, MatchedDetections]:
+    """Key → the evaluator's matching of the predictions file ``paths[key]`` on the test split of ``root``."""
     from zendar_dataset.format.ground_truth import ground_truth_frames
 
     ground_truth = {"frames": ground_truth_frames(root, "test"), "split": "test"}
-    return {row.key: matched_detections(run_path / "rows" / row.key / "predictions.json", ground_truth, split="test")
-            for row in rows}
+    return {key: matched_detections(path, ground_truth, split="test") for key, path in paths.items()}
 
 
 def markdown_claims(verdicts: Mapping[str, Any]) -> str:

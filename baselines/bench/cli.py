@@ -1,6 +1,7 @@
 """Command line of ``zendar-bench``.
 
-    zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--device cpu|cuda]
+    zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
+                 [--ablations] [--device cpu|cuda]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
@@ -16,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from zendar_dataset.cli.arguments import DEVICES, seed_count
+from zendar_dataset.cli.arguments import DEVICES, seed_count, whole_number
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 
@@ -50,6 +51,15 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         "$XDG_CACHE_HOME/zendar-dataset/bench)")
     parser.add_argument("--seeds", type=seed_count(MAX_SEEDS), default=None,
                         help="training seeds per CNN row; mean and std over them (default: the config's; 1 with --quick)")
+    parser.add_argument("--jobs", "-j", type=whole_number("--jobs", 1), default=None, metavar="N",
+                        help="worker processes training CNN seeds at once, one thread each (default: the usable CPUs, "
+                        "at most the seeds left; 1 = in this process, and always 1 with --device cuda); the results "
+                        "do not depend on it")
+    parser.add_argument("--ablations", action="store_true",
+                        help="also measure what two changes of the chain moved: the CFAR row with the SAR reading alone "
+                        "as its static-scene test, and FPN ResNet-34 supervised-only trained on CFAR-gated targets, each "
+                        "against its Table 1 row by paired intervals (ablations.md; adds the default run's 3 seeds of "
+                        "one row)")
     _common(parser)
     parser.set_defaults(func=_bench)
 
@@ -127,7 +137,8 @@ def _bench(args: argparse.Namespace) -> int:
     config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
     seeds = args.seeds or (1 if args.quick else config.seeds)
     data = None if args.data is None else Path(args.data).absolute()
-    options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device)
+    options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device, jobs=args.jobs,
+                           ablations=args.ablations)
     run_bench(options)
     print(f"wrote {Path(args.out) / 'table.md'}, table.csv, results.json, pr_*.png, bev.png and rows/")
     return 0

@@ -36,6 +36,8 @@ class RunContext:
         ``cpu`` or ``cuda``: where the CNNs run.
     code_version : str
         :func:`zendar_baselines.code_version.code_version`.
+    progress : bool
+        Whether the steps show progress bars (off in worker processes, whose bars would interleave).
     """
 
     root: Path
@@ -45,6 +47,7 @@ class RunContext:
     run_path: Path
     device: str
     code_version: str
+    progress: bool = True
 
     @classmethod
     def open(cls, root: Path, config: BenchConfig, run_path: Path, device: str,

@@ -23,21 +23,25 @@ from __future__ import annotations
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic, write_text_atomic
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.report import read_metrics
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
+from zendar_dataset.worker_pool import run_in_workers, usable_cpus
 
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.results_table import METHOD_NAMES, Row, csv_table, markdown_table
-from zendar_baselines.bench.run_directory import RunDirectory, read_json
+from zendar_baselines.bench.run_directory import STEP_RECORD, RunDirectory, read_json
 
 if TYPE_CHECKING:
+    from zendar_baselines.bench.ablations import Ablation
     from zendar_baselines.bench.scoring import ScoringScenes
     from zendar_baselines.labels.splits import SemiSupervisedSplit
 
@@ -57,6 +61,11 @@ class BenchOptions:
         Training seeds per CNN row.
     device : str
         ``cpu`` or ``cuda``.
+    jobs : int or None
+        ``--jobs``: worker processes training CNN seeds at once (:func:`seed_jobs`); None for one per
+        usable CPU.
+    ablations : bool
+        ``--ablations``: also the rows of :mod:`zendar_baselines.bench.ablations`.
     """
 
     config: BenchConfig
@@ -64,6 +73,8 @@ class BenchOptions:
     out: Path
     seeds: int
     device: str
+    jobs: int | None = None
+    ablations: bool = False
 
 
 def cache_root() -> Path:
@@ -109,9 +120,15 @@ def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex]:
 
 def synthesis_jobs(n_scenes: int) -> int:
     """Worker processes for simulating: the usable CPUs, one per scene at most."""
-    from zendar_dataset.sim.generate import usable_cpus
-
     return max(1, min(usable_cpus(), n_scenes))
+
+
+def seed_jobs(requested: int | None, n_seeds: int, device: str) -> int:
+    """Worker processes for the CNN seeds: ``requested`` (default: the usable CPUs), one per seed at
+    most, and one on a GPU (the seeds would share it)."""
+    if device != "cpu":
+        return 1
+    return max(1, min(usable_cpus() if requested is None else requested, n_seeds))
 
 
 def run_bench(options: BenchOptions) -> dict[str, Any]:
@@ -150,24 +167,97 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
                               lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset, cfar_chain, cfar_fit), root))
     rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_metrics(cfar_dir / "metrics.json")]))
 
-    with scoring.ScoringScenes(dataset) as test_scenes:
-        for model_name in config.models:
-            for pretrained in (False, True):
-                key = RowSeed(model_name, pretrained, 0).row_key
-                row = Row(key, METHOD_NAMES[model_name], pretrained, True)
-                for seed in range(options.seeds):
-                    row_seed = RowSeed(model_name, pretrained, seed)
-                    inputs = {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
-                              "validation_masks": validation_key, "model": model_name, "pretrained": pretrained, "seed": seed}
-                    seed_dir, _, _ = run.step(
-                        f"rows/{key}/seed-{seed}", inputs,
-                        lambda d, r=row_seed: _train_and_score(context, labels, r, d, test_scenes),
-                    )
-                    row.seed_metrics.append(read_metrics(seed_dir / "metrics.json"))
-                _copy_first_seed(run.path / "rows" / key)
-                rows.append(row)
+    seed_steps = [
+        SeedStep(context, run.identity, labels, RowSeed(model_name, pretrained, seed),
+                 {**base_inputs, "split": split_key, "autolabels": auto_key, "label_masks": masks_key,
+                  "validation_masks": validation_key, "model": model_name, "pretrained": pretrained, "seed": seed})
+        for model_name in config.models for pretrained in (False, True) for seed in range(options.seeds)
+    ]
+    run_seed_steps(run, seed_steps, seed_jobs(options.jobs, len(seed_steps), options.device))
+    for model_name in config.models:
+        for pretrained in (False, True):
+            key = RowSeed(model_name, pretrained, 0).row_key
+            row = Row(key, METHOD_NAMES[model_name], pretrained, True)
+            row.seed_metrics = [read_metrics(run.path / step.name / "metrics.json") for step in seed_steps if step.row.row_key == key]
+            _copy_first_seed(run.path / "rows" / key)
+            rows.append(row)
 
-    return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started, split)
+    ablations = None
+    if options.ablations:
+        from zendar_baselines.bench.ablations import run_ablations
+
+        ablations = run_ablations(run, context, labels, {"split": split_key, "autolabels": auto_key}, options.seeds,
+                                  options.jobs)
+    return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started, split, ablations)
+
+
+@dataclass(frozen=True)
+class SeedStep:
+    """One CNN row seed's step: train, fit the chain on the model's peaks, score (picklable: it is
+    sent to a worker process)."""
+
+    context: RunContext
+    identity: dict[str, Any]
+    labels: TrainingLabels
+    row: RowSeed
+    inputs: dict[str, Any]
+    directory: str = "rows"
+
+    @property
+    def name(self) -> str:
+        """The step: ``<directory>/<row key>/seed-<k>``."""
+        return f"{self.directory}/{self.row.row_key}/seed-{self.row.seed}"
+
+
+def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> None:
+    """Every seed step not done yet: in this process (``jobs`` 1), or on ``jobs`` worker processes
+    of one thread each. A seed's results do not depend on where it ran: training uses
+    :data:`zendar_baselines.cnn.training.TRAINING_THREADS` threads either way, and each step writes
+    only its own directory."""
+    from zendar_baselines.bench.scoring import ScoringScenes
+
+    todo = []
+    for step in seed_steps:
+        if run.is_done(step.name, step.inputs):
+            run.step(step.name, step.inputs, _never)  # says it is reused
+        else:
+            todo.append(step)
+    if jobs <= 1 or len(todo) <= 1:
+        with ScoringScenes(seed_steps[0].context.dataset) as test_scenes:
+            for step in todo:
+                run.step(step.name, step.inputs, lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes))
+        return
+    # Longest first, so that the seeds left running alone at the end are short: pretrained seeds train
+    # twice, and the later architectures of the config are the slower ones (a DenseNet-67 seed took
+    # up to 2.4 times an FPN-ResNet-34 one on the demo config).
+    todo = sorted(reversed(todo), key=lambda step: not step.row.pretrained)
+    say(f"[rows] {len(todo)} CNN seeds on {jobs} worker processes (one thread each)")
+    with tqdm(total=len(todo), desc="CNN seeds", unit="seed") as bar:
+        run_in_workers(
+            _run_seed_step, todo, jobs, threads=1, on_done=lambda step, _: bar.update(),
+            worker_died=lambda step: ZendarError(
+                f"{step.name}: its worker process died (killed by a signal or out of memory); run zendar-bench "
+                "again to resume, with --jobs 1 if memory is short"),
+        )
+
+
+def _never(step_dir: Path) -> None:
+    raise AssertionError(f"{step_dir}: a finished step was run again")
+
+
+#: A worker process's test scenes, opened by its first seed and kept for the next (:class:`ScoringScenes`).
+_WORKER_SCENES: dict[Path, ScoringScenes] = {}
+
+
+def _run_seed_step(step: SeedStep) -> None:
+    from zendar_baselines.bench.scoring import ScoringScenes
+
+    context = replace(step.context, progress=False)  # one bar in the parent counts the seeds
+    scenes = _WORKER_SCENES.get(context.root)
+    if scenes is None:
+        scenes = _WORKER_SCENES[context.root] = ScoringScenes(context.dataset)
+    run = RunDirectory(context.run_path, step.identity)
+    run.step(step.name, step.inputs, lambda d: _train_and_score(context, step.labels, step.row, d, scenes))
 
 
 def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,
@@ -176,7 +266,8 @@ def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, 
 
     checkpoint = steps.train_row(context, labels, row, out_dir)
     params, fit = chain_step.write_cnn_chain_fit(context, labels.split, checkpoint, row.row_key, out_dir)
-    predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, params, test_scenes, fit)
+    predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, params, test_scenes, fit,
+                                          progress=context.progress)
     scoring.score_into(out_dir, predictions, context.root)
 
 
@@ -187,7 +278,7 @@ def _copy_first_seed(row_dir: Path) -> None:
 
 
 def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: dict[str, Any],
-                   elapsed_s: float, split: SemiSupervisedSplit) -> dict[str, Any]:
+                   elapsed_s: float, split: SemiSupervisedSplit, ablations: list[Ablation] | None) -> dict[str, Any]:
     from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
     from zendar_baselines.bench.chain_step import CFAR_STEP, chain_fit_record
     from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
@@ -217,11 +308,19 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
         "chain_fit": chain_fits,
         "autolabel_quality": quality["quality"],
         "elapsed_s": round(elapsed_s, 1),
+        "step_elapsed_s": step_times_s(out),
     }
-    write_json_atomic(out / "results.json", results)
     table = markdown_table(rows, title)
     table += "\n### The paper's claims, paired intervals (AP points)\n\n" + markdown_claims(verdicts)
     table += "\n### Distinct labelled cars\n\n" + markdown_car_counts(cars)
+    if ablations is not None:
+        from zendar_baselines.bench.ablations import compare_ablations, markdown_ablations
+
+        results["ablations"] = compare_ablations(out, context.root, ablations)
+        ablation_table = markdown_ablations(results["ablations"], {row.key: row.ap_mean() for row in rows})
+        write_text_atomic(out / "ablations.md", "### Ablations, paired intervals (AP points)\n\n" + ablation_table)
+        table += "\n### Ablations, paired intervals (AP points)\n\n" + ablation_table
+    write_json_atomic(out / "results.json", results)
     write_text_atomic(out / "table.md", table)
     write_text_atomic(out / "table.csv", csv_table(rows))
     write_json_atomic(out / "autolabel_quality.json", quality["quality"])
@@ -232,6 +331,17 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
                      {_label(row): out / "rows" / row.key / "predictions.json" for row in rows})
     say(table)
     return results
+
+
+def step_times_s(run_path: Path) -> dict[str, float]:
+    """Step name -> seconds it took when it was computed (reused steps keep their first time; worker
+    processes' steps ran side by side, so they add up to more than the wall time)."""
+    times = {}
+    for record in sorted(run_path.rglob(STEP_RECORD)):
+        elapsed_s = read_json(record).get("elapsed_s")
+        if isinstance(elapsed_s, (int, float)):
+            times[record.parent.relative_to(run_path).as_posix()] = elapsed_s
+    return times
 
 
 def _label(row: Row) -> str:

@@ -13,6 +13,7 @@ import json
 import os
 import shutil
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -103,6 +104,15 @@ class RunDirectory:
             )
         return None
 
+    def is_done(self, name: str, inputs: dict[str, Any]) -> bool:
+        """Whether step ``name`` finished with these ``inputs`` (its record holds their key)."""
+        record = self.path / name / STEP_RECORD
+        try:
+            done = json.loads(record.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            return False
+        return isinstance(done, dict) and done.get("key") == canonical_json_sha256(inputs)
+
     def step(self, name: str, inputs: dict[str, Any], compute: Callable[[Path], Any]) -> tuple[Path, str, bool]:
         """Run ``compute(step_dir)`` unless the step is done with the same inputs.
 
@@ -114,18 +124,18 @@ class RunDirectory:
         """
         key = canonical_json_sha256(inputs)
         step_dir = self.path / name
+        if self.is_done(name, inputs):
+            print(f"[{name}] reused: done before with the same inputs", file=sys.stderr, flush=True)
+            return step_dir, key, True
         record = step_dir / STEP_RECORD
         if record.is_file():
-            try:
-                done = json.loads(record.read_text(encoding="utf-8"))
-            except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-                done = None
-            if isinstance(done, dict) and done.get("key") == key:
-                print(f"[{name}] reused: done before with the same inputs", file=sys.stderr, flush=True)
-                return step_dir, key, True
-            # Our own step made with other inputs: its files are stale, start it over.
+            # Our own step made with other inputs: its files are stale, start it over. (An interrupted
+            # step has no record: its files stay, and training resumes from its checkpoints.)
             shutil.rmtree(step_dir)
         prepare_out_dir(step_dir)
+        started = time.monotonic()
         compute(step_dir)
-        write_json_atomic(record, {"key": key, "inputs": inputs})
+        elapsed_s = round(time.monotonic() - started, 1)
+        write_json_atomic(record, {"key": key, "inputs": inputs, "elapsed_s": elapsed_s})
+        print(f"[{name}] done in {elapsed_s:.1f} s", file=sys.stderr, flush=True)
         return step_dir, key, False

@@ -197,7 +197,7 @@ def model_cells_for(model, window: int, device: str) -> CellsFor:
 
 def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig, checkpoint: Path, device: str,
                     params: ChainParams | None = None, scenes: ScoringScenes | None = None,
-                    chain_fit: dict[str, Any] | None = None) -> dict[str, Any]:
+                    chain_fit: dict[str, Any] | None = None, progress: bool = True) -> dict[str, Any]:
     """A trained model's detections on every test frame, through the CFAR baseline's chain.
 
     Per radar cube (the first cubes of a scene with their window padded by the first map), the
@@ -205,7 +205,8 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     placed by DOA, put to the SAR test with ``params`` (the constants fitted on this model's own
     peaks, whose fit ``chain_fit`` summarises in the meta) and clustered with the other radar's
     points of the frame. ``scenes``: the test scenes shared with other scorings
-    (:class:`ScoringScenes`); by default they are opened for this call only.
+    (:class:`ScoringScenes`); by default they are opened for this call only. ``progress``: show a
+    progress bar over the frames.
     """
     model, architecture = load_model(checkpoint, device)
     params = CNN_CHAIN if params is None else params
@@ -215,7 +216,7 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     with contextlib.ExitStack() as stack:
         if scenes is None:
             scenes = stack.enter_context(ScoringScenes(root, keep=False))
-        results = _predict_test_split(model, scenes, window, params, device, architecture["name"])
+        results = _predict_test_split(model, scenes, window, params, device, architecture["name"], progress)
     meta = {"method": f"{architecture['name']} probability peaks + SAR test + DBSCAN", "checkpoint": checkpoint.name,
             "architecture": architecture, "parameters": params.to_json(), "peak_floor": PEAK_FLOOR}
     if chain_fit is not None:
@@ -224,10 +225,10 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
 
 
 def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
-                        name: str) -> dict[str, list[dict[str, float]]]:
+                        name: str, progress: bool) -> dict[str, list[dict[str, float]]]:
     """Per test frame id, the detections of ``model``'s peaks through the chain (see :func:`cnn_predictions`)."""
     results: dict[str, list[dict[str, float]]] = {}
-    with tqdm(desc=f"{name} test", unit="frame") as bar:
+    with tqdm(desc=f"{name} test", unit="frame", disable=not progress) as bar:
         for scene_id in scenes.scene_ids():
             with scenes.opened(scene_id) as scene:
                 probability = {radar: cube_probabilities(model, scenes.maps(scene, radar), window, device)

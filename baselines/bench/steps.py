@@ -133,8 +133,9 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
     return document
 
 
-def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path) -> None:
-    """Manual-label masks of the labelled segments only (a store of the same format as the automatic one).
+def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path, params: MaskParams | None = None) -> None:
+    """Manual-label masks of the labelled segments only (a store of the same format as the automatic one),
+    made with ``params`` (default :class:`MaskParams`: box-projected targets).
 
     Every cube of each scene with a labelled segment gets a mask, so the store lines up with the
     scene's cubes as the automatic one does; the masks are made from the scene seen through
@@ -143,11 +144,12 @@ def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Pat
     label outside the labelled segments shapes a mask, and none reaches training.
     """
     split.check_manual_label_use(split.labelled)
-    _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks", split)
+    _write_manual_label_masks(run, list(split.labelled), step_dir, "manual-label masks", params, split)
 
 
-def write_validation_masks(run: RunContext, step_dir: Path) -> None:
-    """Manual-label masks of the validation scenes (a store as :func:`write_label_masks`'s; empty without any).
+def write_validation_masks(run: RunContext, step_dir: Path, params: MaskParams | None = None) -> None:
+    """Manual-label masks of the validation scenes (a store as :func:`write_label_masks`'s, with ``params``;
+    empty without any).
 
     They choose each training phase's checkpoint (the epoch of least validation loss) and feed no
     gradient. The test split's labels are never read here.
@@ -162,14 +164,14 @@ def write_validation_masks(run: RunContext, step_dir: Path) -> None:
     if shared:
         raise ZendarError(f"{run.root}: scenes {shared} are in both the val and the test split; the test split "
                           "may not choose checkpoints")
-    _write_manual_label_masks(run, scene_ids, step_dir, "validation masks")
+    _write_manual_label_masks(run, scene_ids, step_dir, "validation masks", params)
 
 
 def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: Path, description: str,
-                              split: SemiSupervisedSplit | None = None) -> None:
+                              params: MaskParams | None, split: SemiSupervisedSplit | None = None) -> None:
     """Manual-label masks of ``scene_ids`` into a store in ``step_dir``; with ``split``, of its labelled
     segments only (:func:`write_label_masks`)."""
-    parameters = {**mask_parameters(), "kind": "labels"}
+    parameters = {**mask_parameters(params), "kind": "labels"}
     store = MaskStore.create(step_dir / STORE_DIR, run.dataset, parameters, code_version=run.code_version)
     for scene_id in tqdm(scene_ids, desc=description, unit="scene"):
         if store.has_scene(scene_id, parameters, run.code_version):
@@ -178,7 +180,7 @@ def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: P
             view = reader if split is None else split.labelled_view(reader)
             masks = {}
             for radar in reader.sensors("radar"):
-                timestamps, targets = scene_masks(view, radar, "labels", progress=False)
+                timestamps, targets = scene_masks(view, radar, "labels", params=params, progress=False)
                 if split is not None:
                     targets[~split.is_labelled(scene_id, timestamps)] = UNCERTAIN
                 masks[radar] = (timestamps, targets)
@@ -282,7 +284,7 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
         model = fresh_model()
         results["pretrain"] = train(
             model, everything, config.pretrain, seed=row.seed, out_dir=out_dir / "pretrain", device=run.device,
-            validation=validation,
+            validation=validation, progress=run.progress,
             description=f"{row.model_name} pretrain seed {row.seed} ({parameter_count(model):,} parameters)")
         init_from = results["pretrain"].checkpoint_path
     model = fresh_model()
@@ -290,7 +292,7 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
     phase = "fine-tune" if row.pretrained else "supervised"
     results[phase] = train(
         model, labelled, schedule, seed=row.seed, out_dir=out_dir / phase, device=run.device, init_from=init_from,
-        validation=validation,
+        validation=validation, progress=run.progress,
         description=f"{row.model_name} {phase} seed {row.seed} ({parameter_count(model):,} parameters)")
     write_training_records(out_dir, row, results, validation_record)
     return results[phase].checkpoint_path

@@ -54,6 +54,7 @@ from zendar_dataset.detection import (
     FramePoints,
     LabelBoxes,
     cfar_cells,
+    cluster_labels,
     frame_clusters,
     frame_cube_points,
     frame_detections,
@@ -194,17 +195,20 @@ def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsF
     return frames
 
 
-def centre_offset_m(frames: LabelledFrames, params: ChainParams) -> float | None:
+def centre_offset_m(frames: LabelledFrames, params: ChainParams,
+                    cluster_ids: dict[str, np.ndarray] | None = None) -> float | None:
     """The median along-line-of-sight distance from cluster centres to nearby labels (module docstring).
 
-    None when no cluster has a label within :data:`OFFSET_MATCH_RADIUS_M`.
+    None when no cluster has a label within :data:`OFFSET_MATCH_RADIUS_M`. ``cluster_ids``: frame id ->
+    its points' cluster labels at ``params.cluster_eps_m`` when already known (:func:`cluster_ids_of`).
     """
+    cluster_ids = {} if cluster_ids is None else cluster_ids
     offsets = []
     for fid, points in frames.points.items():
         labels = frames.labels[fid]
         if labels.shape[0] == 0:
             continue
-        for cluster in frame_clusters(points.retested(params.sar), params):
+        for cluster in frame_clusters(points.retested(params.sar), params, cluster_ids.get(fid)):
             distance = np.hypot(*(labels - cluster.centre_xy).T)
             nearest = int(np.argmin(distance))
             line_of_sight = cluster.centre_xy - cluster.radar_xy
@@ -214,9 +218,20 @@ def centre_offset_m(frames: LabelledFrames, params: ChainParams) -> float | None
     return float(np.median(offsets)) if offsets else None
 
 
-def chain_ap(frames: LabelledFrames, params: ChainParams) -> dict[str, float | None]:
-    """AP per band of the chain's detections on the frames, under the official evaluator."""
-    results = {fid: frame_detections(points.retested(params.sar), params) for fid, points in frames.points.items()}
+def cluster_ids_of(frames: LabelledFrames, eps_m: float) -> dict[str, np.ndarray]:
+    """Frame id -> ``[P]`` int cluster label of each of its points at radius ``eps_m``
+    (:func:`zendar_dataset.detection.cluster_labels`): independent of the SAR test, so a fit trying
+    many thresholds clusters every frame once per radius."""
+    return {fid: cluster_labels(points.points_xy, eps_m) for fid, points in frames.points.items()}
+
+
+def chain_ap(frames: LabelledFrames, params: ChainParams,
+             cluster_ids: dict[str, np.ndarray] | None = None) -> dict[str, float | None]:
+    """AP per band of the chain's detections on the frames, under the official evaluator
+    (``cluster_ids`` as :func:`centre_offset_m`)."""
+    cluster_ids = {} if cluster_ids is None else cluster_ids
+    results = {fid: frame_detections(points.retested(params.sar), params, cluster_ids.get(fid))
+               for fid, points in frames.points.items()}
     truth = {fid: [{"x": float(x), "y": float(y)} for x, y in labels] for fid, labels in frames.labels.items()}
     return dict(evaluate_record({"meta": {"method": "chain_fit"}, "results": results}, {"frames": truth}).ap)
 
@@ -301,8 +316,9 @@ def separation_of(on_car: np.ndarray, sar_db: np.ndarray, range_m: np.ndarray) -
     }
 
 
-def _offset_for(frames: LabelledFrames, params: ChainParams) -> ChainParams:
-    offset = centre_offset_m(frames, replace(params, centre_offset_m=0.0))
+def _offset_for(frames: LabelledFrames, params: ChainParams,
+                cluster_ids: dict[str, np.ndarray] | None = None) -> ChainParams:
+    offset = centre_offset_m(frames, replace(params, centre_offset_m=0.0), cluster_ids)
     return replace(params, centre_offset_m=0.0 if offset is None else round(offset, 2))
 
 
@@ -430,10 +446,20 @@ def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CF
     if threshold_by == "detections":
         thresholds_db += [t for t in DETECTION_THRESHOLD_GRID_DB.tolist() if t not in thresholds_db]
     grid = []
+    cluster_ids = {eps_m: cluster_ids_of(frames, eps_m) for eps_m in CLUSTER_EPS_GRID_M}
+    sar_db = frames.sar_db
+    # Points are dynamic below the threshold, so the dynamic sets of two thresholds are nested: as
+    # many dynamic points means the same points, the same offset and the same AP (computed once).
+    done: dict[tuple[int, float], tuple[float, dict[str, float | None]]] = {}
     for threshold_db in thresholds_db:
+        n_dynamic = int(np.count_nonzero(sar_db < threshold_db))
         for eps_m in CLUSTER_EPS_GRID_M:
-            trial = _offset_for(frames, replace(base, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m))
-            grid.append((trial, chain_ap(frames, trial)))
+            trial = replace(base, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m)
+            if (n_dynamic, eps_m) not in done:
+                fitted = _offset_for(frames, trial, cluster_ids[eps_m])
+                done[n_dynamic, eps_m] = fitted.centre_offset_m, chain_ap(frames, fitted, cluster_ids[eps_m])
+            offset_m, ap = done[n_dynamic, eps_m]
+            grid.append((replace(trial, centre_offset_m=offset_m), ap))
     if not grid or max((-1.0 if a["all"] is None else a["all"]) for _, a in grid) <= 0.0:
         raise ZendarError(
             f"{where}: no SAR threshold and cluster radius let the {detector} chain find a labelled car "

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from zendar_dataset.sim.generate import synthesize_dataset
+from zendar_dataset.worker_pool import usable_cpus
 
 pytestmark = pytest.mark.slow
 
@@ -52,8 +53,14 @@ def test_quick_bench_writes_table_one(quick_run):
     out = home / "out"
     # The dataset was simulated into the cache, never into the working directory.
     assert (home / "cache" / "zendar-dataset" / "bench").is_dir()
+    if usable_cpus() >= 2:  # the seeds trained side by side, one thread each
+        assert f"6 CNN seeds on {min(usable_cpus(), 6)} worker processes (one thread each)" in done.stderr
     results = json.loads((out / "results.json").read_text())
     assert [(r["method"], r["unsupervised"], r["supervised"]) for r in results["rows"]] == ROWS
+    steps = results["step_elapsed_s"]  # the time of every step, as each step.json recorded it
+    assert {"split", "autolabels", "chain_fit/cfar", "rows/cfar", "rows/densenet-67-pretrained/seed-0"} <= set(steps)
+    assert all(seconds >= 0 for seconds in steps.values())
+    assert steps["rows/cfar"] == json.loads((out / "rows" / "cfar" / "step.json").read_text())["elapsed_s"]
     for row in results["rows"]:
         assert set(row["ap"]) == set(BANDS)
         for band in BANDS:
@@ -182,6 +189,51 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
             assert not scenes.keep and again is not scene
 
 
+def test_a_seed_trained_in_this_process_equals_the_one_a_worker_trained(quick_run, tmp_path):
+    """The quick run trains its seeds on worker processes; with one seed removed, ``--jobs 1`` trains
+    it again here and every output reads the same: results do not depend on where a seed ran."""
+    home, _ = quick_run
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-a", str(home / "out"), str(copy)], check=True)
+    seed_dir = copy / "rows" / "densenet-37-supervised" / "seed-0"
+    recorded = {name: (seed_dir / name).read_text() for name in ("predictions.json", "metrics.json", "chain_fit.json")}
+    subprocess.run(["rm", "-r", str(seed_dir)], check=True)
+    done = bench("--quick", "--jobs", "1", "--out", str(copy), env_home=home)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "worker processes" not in done.stderr and "densenet-37 supervised seed 0" in done.stderr
+    assert {name: (seed_dir / name).read_text() for name in recorded} == recorded
+    assert (copy / "table.md").read_text() == (home / "out" / "table.md").read_text()
+
+
+def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(quick_run, tmp_path):
+    """``--ablations`` on a finished run: Table 1's steps are reused, the two ablation rows are made
+    (the CFAR row with the SAR reading alone, FPN ResNet-34 supervised on CFAR-gated targets), and
+    each difference on all frames is the two rows' AP as the evaluator scored them."""
+    home, _ = quick_run
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-a", str(home / "out"), str(copy)], check=True)
+    done = bench("--quick", "--ablations", "--out", str(copy), env_home=home)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "[rows/cfar] reused" in done.stderr and "fpn-resnet34 supervised seed 0" in done.stderr
+    results = json.loads((copy / "results.json").read_text())
+    assert [a["ablation"] for a in results["ablations"]] == ["sar-reading-alone", "cfar-gated-targets"]
+    assert [a["reference"] for a in results["ablations"]] == ["cfar", "fpn-resnet34-supervised"]
+    for ablation in results["ablations"]:
+        row_ap = json.loads((copy / ablation["row"]["metrics"]).read_text())["ap"]
+        reference_ap = json.loads((copy / "rows" / ablation["reference"] / "metrics.json").read_text())["ap"]
+        for band, comparison in ablation["minus_reference"].items():
+            if row_ap[band] is not None and reference_ap[band] is not None:
+                assert comparison["difference"] == pytest.approx(row_ap[band] - reference_ap[band], abs=1e-4)
+            assert comparison["reading"] in ("higher", "lower", "no difference shown")
+    meta = json.loads((copy / "ablations" / "sar-reading-alone" / "row" / "predictions.json").read_text())["meta"]
+    assert meta["parameters"]["sar"]["value"] == "SAR reading"
+    store = json.loads((copy / "ablations" / "cfar-gated-targets" / "label_masks" / "store" / "manifest.json").read_text())
+    assert store["parameters"]["manual_targets"] == "cfar-peaks"
+    table = (copy / "ablations.md").read_text()
+    assert "sar-reading-alone (vs cfar)" in table and "cfar-gated-targets (vs fpn-resnet34-supervised)" in table
+    assert (copy / "ablations.md").read_text() in (copy / "table.md").read_text()
+
+
 def test_verify_names_a_damaged_checkpoint(quick_run, tmp_path):
     home, _ = quick_run
     copy = tmp_path / "copy"
@@ -227,6 +279,7 @@ def test_a_dataset_without_test_labels_is_refused(tmp_path):
         (["--seeds", "0"], "expected 1 to 100 seeds"),
         (["--seeds", "three"], "expected a whole number of seeds"),
         (["--config", "huge"], "invalid choice: 'huge'"),
+        (["--jobs", "0"], "--jobs must be 1 or more, got 0"),
         (["--device", "tpu"], "invalid choice: 'tpu'"),
     ],
 )

@@ -227,3 +227,43 @@ def test_a_threshold_by_the_detections_keeps_the_cars_the_points_criterion_would
     assert by_detections.sar.threshold_db > 41.0  # above every car's value: the test lets them through
     with pytest.raises(ZendarError, match="threshold_by must be one of"):
         fit_on_frames(frames, ChainParams(), threshold_by="votes")
+
+
+def test_the_detection_grid_computed_once_per_dynamic_set_equals_every_pair_computed_afresh():
+    """``fit_on_frames`` clusters each frame once per radius and computes thresholds with the same
+    dynamic points once: its choice and its radius grid equal a plain loop over every pair."""
+    from dataclasses import replace
+
+    from zendar_baselines.classical.chain_fit import DETECTION_THRESHOLD_GRID_DB, centre_offset_m, chain_ap
+
+    rng = np.random.default_rng(3)
+    frames = LabelledFrames({}, {}, {}, {}, {"scene-a": []})
+    for k in range(12):
+        fid = f"scene-a/{k}"
+        cars = rng.uniform((8.0, -20.0), (55.0, 20.0), size=(3, 2))
+        car_points = np.concatenate([car + rng.normal(0.0, 0.8, size=(4, 2)) for car in cars])
+        clutter = rng.uniform((0.0, -30.0), (60.0, 30.0), size=(20, 2))
+        points_xy = np.concatenate([car_points, clutter])
+        sar_db = np.concatenate([rng.normal(5.0, 12.0, len(car_points)), rng.normal(30.0, 15.0, len(clutter))])
+        sar_db[rng.random(len(sar_db)) < 0.1] = np.nan
+        frames.points[fid] = FramePoints(points_xy, np.zeros_like(points_xy), rng.random(len(points_xy)), sar_db,
+                                         np.zeros(len(points_xy), bool))
+        frames.labels[fid] = cars
+        frames.on_car[fid] = np.arange(len(points_xy)) < len(car_points)
+        frames.range_m[fid] = np.hypot(*points_xy.T)
+        frames.scene_frames["scene-a"].append(fid)
+    base = ChainParams(cluster_score="max")
+    fitted, fit = fit_on_frames(frames, base, "CNN", threshold_by="detections")
+    f1_db = round(2.0 * fit["point_separation"]["f1_threshold_db"]) / 2.0
+    plain = []
+    for threshold_db in [f1_db] + [t for t in DETECTION_THRESHOLD_GRID_DB.tolist() if t != f1_db]:
+        for eps_m in CLUSTER_EPS_GRID_M:
+            trial = replace(base, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m)
+            offset = centre_offset_m(frames, trial)
+            trial = replace(trial, centre_offset_m=0.0 if offset is None else round(offset, 2))
+            plain.append((trial, chain_ap(frames, trial)))
+    best, best_ap = max(plain, key=lambda entry: -1.0 if entry[1]["all"] is None else entry[1]["all"])
+    assert fitted == best and fit["ap"] == best_ap
+    assert fit["radius_grid"] == [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": a["all"]}
+                                  for t, a in plain if t.sar.threshold_db == best.sar.threshold_db]
+    assert len({a["all"] for _, a in plain}) > 5  # the grid's pairs do differ: the test compares something

@@ -179,19 +179,41 @@ def test_a_cells_snr_is_its_power_over_the_training_cells_mean():
     assert cell_snr_db(amplitude, RadarCells(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))).shape == (0,)
 
 
-def test_cube_points_subtract_each_cells_own_snr_from_its_sar_reading():
+def _point_target_on_a_bright_pixel():
+    """A point target at 18 m seen by a parked radar, and a SAR image with one bright pixel where the
+    chain places the target's strongest cell: ``(cube, cells, strongest, calibration, poses, sar)``."""
     params = radar_params(n_samples=128)
     calibration = radar_calibration(params, 0.0, (0.0, 0.0, 0.0))
     cube = simulate_cube(params, np.array([[18.0, 0.0, 0.0]]), np.zeros((1, 3)), [1.0], noise=1e-2)
     cells = cfar_cells(cube)
     strongest = int(np.argmax(cells.score))
     poses = parked_poses()
-    first = cube_points(cube, cells, T0_NS, calibration, poses, sar_frames())
-    bright_xy = tuple(first.points_ego[strongest, :2])
+    bright_xy = tuple(cube_points(cube, cells, T0_NS, calibration, poses, sar_frames()).points_ego[strongest, :2])
     sar = sar_frames(front=sar_frame(poses, (10.0, -10.0), PIXEL_M, (200, 200), [bright_xy], WALL_AMPLITUDE))
+    return cube, cells, strongest, calibration, poses, sar
+
+
+def test_cube_points_subtract_each_cells_own_snr_from_its_sar_reading():
+    cube, cells, strongest, calibration, poses, sar = _point_target_on_a_bright_pixel()
     points = cube_points(cube, cells, T0_NS, calibration, poses, sar)
     expected = 20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB - 10 * math.log10(cells.score[strongest])
     assert points.sar_db[strongest] == pytest.approx(expected, abs=0.5)
+
+
+def test_without_the_snr_subtraction_a_point_reads_its_sar_reading_alone():
+    """The ablation's test (``subtract_rd_snr=False``): the same point reads its SNR higher, and the
+    chain's parameters say which value they were fitted on."""
+    from zendar_dataset.detection import ChainParams
+
+    cube, cells, strongest, calibration, poses, sar = _point_target_on_a_bright_pixel()
+    reading_alone = ChainParams(sar=SarTestParams(subtract_rd_snr=False))
+    subtracted = cube_points(cube, cells, T0_NS, calibration, poses, sar)
+    alone = cube_points(cube, cells, T0_NS, calibration, poses, sar, reading_alone)
+    assert alone.sar_db[strongest] == pytest.approx(20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB, abs=0.5)
+    finite = np.isfinite(subtracted.sar_db)
+    np.testing.assert_allclose(alone.sar_db[finite] - subtracted.sar_db[finite], cell_snr_db(cube, cells)[finite])
+    assert reading_alone.to_json()["sar"]["value"] == "SAR reading"
+    assert ChainParams().to_json()["sar"]["value"] == "SAR reading minus range-Doppler SNR"
 
 
 def test_bad_settings_and_points_raise_named_errors(scene):

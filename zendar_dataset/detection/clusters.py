@@ -60,7 +60,8 @@ class Cluster:
         return self.centre_xy + offset_m * line_of_sight / distance if distance > 0 else self.centre_xy
 
 
-def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> list[Cluster]:
+def frame_clusters(points: FramePoints, params: ChainParams | None = None,
+                   labels: np.ndarray | None = None) -> list[Cluster]:
     """DBSCAN over all of a frame's points; the clusters holding dynamic points (module docstring).
 
     Parameters
@@ -69,11 +70,15 @@ def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> li
         Every radar's points of the frame (:meth:`FramePoints.concatenate` of :func:`to_frame`).
     params : ChainParams, optional
         ``cluster_eps_m`` and ``cluster_score``.
+    labels : numpy.ndarray, optional
+        ``[N]`` int :func:`cluster_labels` of ``points.points_xy`` at ``params.cluster_eps_m``, when
+        already known: they do not depend on the SAR test, so a fit trying many thresholds clusters
+        each frame once per radius.
     """
     params = ChainParams() if params is None else params
     if not np.any(points.dynamic):
         return []
-    labels = cluster_labels(points.points_xy, params.cluster_eps_m)
+    labels = cluster_labels(points.points_xy, params.cluster_eps_m) if labels is None else labels
     n_clusters = int(labels.max()) + 1
     moving = points.dynamic
     n_points = np.bincount(labels, minlength=n_clusters)
@@ -99,7 +104,8 @@ def frame_clusters(points: FramePoints, params: ChainParams | None = None) -> li
     ]
 
 
-def frame_detections(points: FramePoints, params: ChainParams | None = None) -> list[dict[str, float]]:
+def frame_detections(points: FramePoints, params: ChainParams | None = None,
+                     labels: np.ndarray | None = None) -> list[dict[str, float]]:
     """One scored detection per cluster holding dynamic points, its centre corrected for occlusion.
 
     Parameters
@@ -108,6 +114,8 @@ def frame_detections(points: FramePoints, params: ChainParams | None = None) -> 
         Every radar's points of the frame.
     params : ChainParams, optional
         ``cluster_eps_m`` and ``centre_offset_m``.
+    labels : numpy.ndarray, optional
+        The points' cluster labels when already known (:func:`frame_clusters`).
 
     Returns
     -------
@@ -116,7 +124,7 @@ def frame_detections(points: FramePoints, params: ChainParams | None = None) -> 
     """
     params = ChainParams() if params is None else params
     detections = []
-    for cluster in frame_clusters(points, params):
+    for cluster in frame_clusters(points, params, labels):
         x, y = cluster.corrected_centre(params.centre_offset_m)
         detections.append({"x": float(x), "y": float(y), "score": cluster.score})
     return detections

@@ -153,12 +153,13 @@ def cube_points(
     sar : SarFrames
         The scene's SAR images.
     params : ChainParams, optional
-        ``sar`` settings.
+        ``sar`` settings (the SNR is subtracted unless ``params.sar.subtract_rd_snr`` is False).
     """
     params = ChainParams() if params is None else params
     points_ego, residual_mps = locate_cells(cube, cells.range_bin, cells.doppler_bin, timestamp_ns, calibration, poses)
     ecef_T_ego = poses.ecef_T_ego(int(timestamp_ns))
-    sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, rd_snr_db=cell_snr_db(cube, cells, params),
+    rd_snr_db = cell_snr_db(cube, cells, params) if params.sar.subtract_rd_snr else np.zeros(cells.score.shape)
+    sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, rd_snr_db=rd_snr_db,
                        max_frame_gap_ns=params.sar.max_frame_gap_ns)
     return CubePoints(
         int(timestamp_ns), ecef_T_ego, np.asarray(ego_T_sensor(calibration).translation, np.float64), cells.range_bin, cells.doppler_bin,

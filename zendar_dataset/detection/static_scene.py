@@ -75,10 +75,15 @@ class SarTestParams:
         median minus its range-Doppler SNR, dB) is below this.
     max_frame_gap_ns : int
         A point is read only in SAR frames at most this far from its timestamp.
+    subtract_rd_snr : bool
+        True (the test): the value is the SAR reading minus the point's range-Doppler SNR. False: the
+        SAR reading alone, the test before the SNR was subtracted, blind to range (module docstring);
+        kept for ``zendar-bench --ablations``, which measures what the subtraction changes.
     """
 
     threshold_db: float = DEFAULT_THRESHOLD_DB
     max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS
+    subtract_rd_snr: bool = True
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.threshold_db):
@@ -90,7 +95,7 @@ class SarTestParams:
         """A JSON-ready dict, with the search radius the values were read with."""
         return {
             **asdict(self), "search_radius_m": SAR_SEARCH_RADIUS_M, "reference": "median SAR magnitude",
-            "value": "SAR reading minus range-Doppler SNR",
+            "value": "SAR reading minus range-Doppler SNR" if self.subtract_rd_snr else "SAR reading",
         }
 
 

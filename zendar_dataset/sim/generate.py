@@ -21,14 +21,10 @@ from __future__ import annotations
 
 import ast
 import json
-import multiprocessing
 import numbers
 import os
 import pathlib
-import signal
 import sys
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 from tqdm import tqdm
@@ -41,6 +37,7 @@ from zendar_dataset.sim import ego as ego_model
 from zendar_dataset.sim.profiles import SimProfile, get_profile
 from zendar_dataset.sim.scene import build_scene, write_scene
 from zendar_dataset.temporary_files import remove_stale_temporaries
+from zendar_dataset.worker_pool import run_in_workers, usable_cpus
 
 SIDECAR = "simulation.json"
 GROUND_TRUTH_DIR = "ground_truth"
@@ -139,14 +136,6 @@ class SceneSynthesisError(RuntimeError):
         return (type(self), (self.scene_id, self.cause_message))
 
 
-def usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask, not the machine's count)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # no affinity API (macOS, Windows)
-        return os.cpu_count() or 1
-
-
 def synthesize_dataset(
     out: str | os.PathLike,
     profile: str | SimProfile = "demo",
@@ -241,7 +230,12 @@ def synthesize_dataset(
                 _run_task(task)
                 bar.update()
         else:
-            _run_in_workers(out, todo, n_jobs, max(1, cpus // n_jobs), bar)
+            run_in_workers(
+                _run_task, todo, n_jobs, max(1, cpus // n_jobs), on_done=lambda task, scene_id: bar.update(),
+                worker_died=lambda task: SceneSynthesisError(
+                    task.scene_id, "a worker process died (killed by a signal, out of memory, or failed at start-up)"),
+                # Killed workers leave hidden temporary stores, never a scene at its final path.
+                on_interrupt=lambda: _remove_interrupted(out))
     writer.finalize(splits)
     if withhold_test_labels:
         frames: dict = {}
@@ -363,80 +357,6 @@ def _is_main_guard(statement: ast.AST) -> bool:
     names = [o for o in operands if isinstance(o, ast.Name) and o.id == "__name__"]
     constants = [o for o in operands if isinstance(o, ast.Constant) and o.value == "__main__"]
     return len(names) == 1 and len(constants) == 1
-
-
-def _init_worker(threads: int) -> None:
-    """Worker set-up: leave Ctrl-C to the parent, and cap numba and BLAS/OpenMP threads."""
-    global _THREAD_LIMITS
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    import numba
-    from threadpoolctl import threadpool_limits
-
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    _THREAD_LIMITS = threadpool_limits(limits=threads)  # kept alive: the limits hold while it exists
-
-
-_THREAD_LIMITS = None
-
-
-def _run_in_workers(out: pathlib.Path, todo: list[_SceneTask], jobs: int, threads: int, bar: tqdm) -> None:
-    """Run ``todo`` on ``jobs`` spawned processes, handing out one scene per free worker.
-
-    After a scene fails no new one is started, the scenes in progress are
-    finished (kept for the re-run), and the first failure is raised. A worker
-    that dies fails the run (a ``ProcessPoolExecutor`` is broken by a dead
-    worker, where a ``multiprocessing.Pool`` would start replacements for
-    ever). Ctrl-C stops every worker at once; their hidden temporary stores are
-    removed.
-    """
-    executor = ProcessPoolExecutor(
-        jobs, mp_context=multiprocessing.get_context("spawn"), initializer=_init_worker, initargs=(threads,)
-    )
-    try:
-        pending = iter(todo)
-        running: dict[Future, _SceneTask] = {}
-        failure: BaseException | None = None
-        for task in pending:
-            running[executor.submit(_run_task, task)] = task
-            if len(running) == jobs:
-                break
-        while running:
-            done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for future in done:
-                task = running.pop(future)
-                error = future.exception()
-                if isinstance(error, BrokenProcessPool):
-                    error = SceneSynthesisError(
-                        task.scene_id, "a worker process died (killed by a signal, out of memory, or failed at start-up)"
-                    )
-                if error is not None:
-                    failure = failure or error
-                    continue
-                bar.update()
-                task = next(pending, None) if failure is None else None
-                if task is not None:
-                    running[executor.submit(_run_task, task)] = task
-        executor.shutdown(wait=True)
-    except BaseException:
-        # Killed workers leave hidden temporary stores, never a scene at its final path.
-        _terminate(executor)
-        _remove_interrupted(out)
-        raise
-    if failure is not None:
-        raise failure
-
-
-def _terminate(executor: ProcessPoolExecutor) -> None:
-    """Stop ``executor``'s workers now, without waiting for their scenes."""
-    # The executor has no public way before 3.14 to stop running workers, and 3.14's
-    # ``terminate_workers`` does not wait for them; the caller then removes the workers' temporaries,
-    # which counts only as stale once their processes are gone: terminate and join through the table.
-    processes = list((executor._processes or {}).values())
-    for process in processes:
-        process.terminate()
-    for process in processes:
-        process.join()
-    executor.shutdown(wait=True, cancel_futures=True)
 
 
 def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:

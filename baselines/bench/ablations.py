@@ -1,0 +1,178 @@
+"""``zendar-bench --ablations``: what two of the chain's changes moved, measured as rows beside Table 1.
+
+- ``sar-reading-alone``: the CFAR row with the SAR test as it was before the range-Doppler SNR was
+  subtracted (a point's SAR value is its SAR reading alone, dB over the image median:
+  :attr:`zendar_dataset.detection.SarTestParams.subtract_rd_snr` False), its threshold, radius and
+  offset fitted the same way on the same labelled frames. Reference: the CFAR row.
+- ``cfar-gated-targets``: :data:`ABLATION_MODEL` supervised-only, trained on the manual-label targets
+  as they were before the box projection (MOVING only at CFAR peaks inside a labelled box and their
+  grown segments: ``MaskParams(manual_targets="cfar-peaks")``), its checkpoints chosen on validation
+  masks made the same way; otherwise the row's own training, chain fit and scoring, with the same
+  seeds. Reference: that architecture's supervised-only row.
+
+Each ablation row is scored on the test split as Table 1's rows are and compared with its reference
+by the claims' paired bootstrap (first seeds, the same resamples of the test split's time blocks,
+:func:`zendar_baselines.bench.claims.shared_resamples`): the difference ablation − reference per
+band with its 95 % interval; "higher" / "lower" when the interval excludes 0, else "no difference
+shown". Outputs: ``ablations.md`` and ``results.json``'s ``ablations``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from zendar_dataset.detection import ChainParams
+from zendar_dataset.eval.paired import FAILS, HOLDS, paired_difference
+from zendar_dataset.eval.protocol import RANGE_BANDS
+from zendar_dataset.eval.report import read_metrics
+
+from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
+from zendar_baselines.bench.results_table import METHOD_NAMES, Row
+from zendar_baselines.bench.run_directory import RunDirectory
+from zendar_baselines.labels.masks import MaskParams
+
+#: The architecture whose supervised-only row the target ablation retrains (the paper's first CNN row).
+ABLATION_MODEL = "fpn-resnet34"
+#: Where the ablations' steps live in the run directory.
+ABLATIONS_DIR = "ablations"
+#: What a comparison's interval says, by the paired verdict of ablation − reference.
+READINGS = {HOLDS: "higher", FAILS: "lower"}
+NO_DIFFERENCE = "no difference shown"
+
+
+@dataclass(frozen=True)
+class Ablation:
+    """One ablation row: what it changes, the Table 1 row it is compared with, and where its first
+    seed's outputs are (``folder``, relative to the run directory)."""
+
+    name: str
+    change: str
+    reference: str
+    row: Row
+    folder: str
+
+    def to_json(self) -> dict[str, Any]:
+        return self.row.to_json() | {"metrics": f"{self.folder}/metrics.json", "predictions": f"{self.folder}/predictions.json"}
+
+
+def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels, keys: dict[str, str], seeds: int,
+                  jobs: int | None) -> list[Ablation]:
+    """Every ablation's steps (cached like the run's own) and its rows.
+
+    Parameters
+    ----------
+    run, context, labels
+        The run's directory, context and training labels.
+    keys
+        The run's ``split`` and ``autolabels`` step keys.
+    seeds
+        Seeds of the retrained row (those of Table 1's rows).
+    jobs
+        ``--jobs`` (:func:`zendar_baselines.bench.run.seed_jobs`).
+    """
+    from zendar_baselines.bench import chain_step, scoring, steps
+    from zendar_baselines.bench.run import SeedStep, run_seed_steps, seed_jobs
+    from zendar_baselines.classical.chain_fit import cfar_cells_for
+
+    base_inputs = context.step_inputs()
+    dataset = context.dataset
+    ablations = []
+
+    # The SAR test without the SNR subtraction, on the CFAR row.
+    name = "sar-reading-alone"
+    base = replace(ChainParams(), sar=replace(ChainParams().sar, subtract_rd_snr=False))
+    fit_dir, fit_key, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/chain_fit", {**base_inputs, "split": keys["split"], "ablation": name},
+        lambda d: chain_step.write_chain_fit(context, labels.split, "CFAR (SAR reading alone)", cfar_cells_for(base), base, d))
+    params, fit = chain_step.read_chain_fit(fit_dir)
+    row_dir, _, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/row", {**base_inputs, "chain_fit": fit_key, "ablation": name},
+        lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset, params, fit), context.root))
+    ablations.append(Ablation(name, "SAR test: the SAR reading alone (no range-Doppler SNR subtracted)", "cfar",
+                              Row(f"cfar-{name}", METHOD_NAMES["cfar"], False, False, [read_metrics(row_dir / "metrics.json")]),
+                              f"{ABLATIONS_DIR}/{name}/row"))
+
+    # CFAR-gated manual-label targets, on the supervised-only row.
+    name = "cfar-gated-targets"
+    gated = MaskParams(manual_targets="cfar-peaks")
+    masks_dir, masks_key, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/label_masks", {**base_inputs, "split": keys["split"], "ablation": name},
+        lambda d: steps.write_label_masks(context, labels.split, d, gated))
+    validation_dir, validation_key, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/validation_masks", {**base_inputs, "ablation": name},
+        lambda d: steps.write_validation_masks(context, d, gated))
+    gated_labels = replace(labels, masks_dir=masks_dir, validation_dir=validation_dir)
+    seed_steps = [
+        SeedStep(context, run.identity, gated_labels, RowSeed(ABLATION_MODEL, False, seed),
+                 {**base_inputs, "split": keys["split"], "autolabels": keys["autolabels"], "label_masks": masks_key,
+                  "validation_masks": validation_key, "model": ABLATION_MODEL, "pretrained": False, "seed": seed,
+                  "ablation": name},
+                 f"{ABLATIONS_DIR}/{name}")
+        for seed in range(seeds)
+    ]
+    run_seed_steps(run, seed_steps, seed_jobs(jobs, len(seed_steps), context.device))
+    reference = RowSeed(ABLATION_MODEL, False, 0).row_key
+    ablations.append(Ablation(
+        name, "manual-label targets: CFAR peaks inside labelled boxes (before the box projection)", reference,
+        Row(f"{reference}-{name}", METHOD_NAMES[ABLATION_MODEL], False, True,
+            [read_metrics(run.path / step.name / "metrics.json") for step in seed_steps]),
+        seed_steps[0].name))
+    return ablations
+
+
+def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation]) -> list[dict[str, Any]]:
+    """``results.json``'s ``ablations``: each row's AP (mean over seeds) and its paired differences
+    from its reference row per band (first seeds, the claims' shared resamples)."""
+    from zendar_baselines.bench.claims import matched_predictions, shared_resamples
+
+    paths = {ablation.row.key: run_path / ablation.folder / "predictions.json" for ablation in ablations}
+    paths.update({ablation.reference: run_path / "rows" / ablation.reference / "predictions.json" for ablation in ablations})
+    keys = list(paths)
+    aps, resampling = shared_resamples(keys, matched_predictions(paths, root))
+    out = []
+    for ablation in ablations:
+        comparisons = {}
+        for band in RANGE_BANDS:
+            result = paired_difference(aps[ablation.row.key][band], aps[ablation.reference][band])
+            comparisons[band] = {
+                "difference": _round(result.difference), "ci95": [_round(result.low), _round(result.high)],
+                "reading": READINGS.get(result.verdict, NO_DIFFERENCE),
+            }
+        out.append({"ablation": ablation.name, "change": ablation.change, "reference": ablation.reference,
+                    "row": ablation.to_json(),
+                    "minus_reference": comparisons, "resampling": resampling})
+    return out
+
+
+def markdown_ablations(records: list[dict[str, Any]], reference_aps: dict[str, dict[str, float | None]]) -> str:
+    """The ablations' table: AP per band of the ablation row and its reference, and the difference
+    [95 % interval] in AP points."""
+    lines = ["| ablation | change | band | AP ablation | AP reference | ablation − reference [95 % interval] | reading |",
+             "|---|---|---|--:|--:|--:|---|"]
+    for record in records:
+        for band in (*RANGE_BANDS, "all"):
+            ap = record["row"]["ap"][band]
+            reference = reference_aps[record["reference"]][band]
+            cell = "" if band == "all" else _difference_cell(record["minus_reference"][band])
+            reading = "" if band == "all" else record["minus_reference"][band]["reading"]
+            lines.append(f"| {record['ablation']} (vs {record['reference']}) | {record['change']} | {band} | "
+                         f"{_percent(ap)} | {_percent(reference)} | {cell} | {reading} |")
+    return "\n".join(lines) + "\n"
+
+
+def _difference_cell(comparison: dict[str, Any]) -> str:
+    difference, (low, high) = comparison["difference"], comparison["ci95"]
+    if difference is None:
+        return "n/a"
+    shown = f"{100 * difference:+.1f}"
+    return shown if low is None else f"{shown} [{100 * low:+.1f}, {100 * high:+.1f}]"
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.1f}"
+
+
+def _round(value: float | None) -> float | None:
+    return None if value is None else round(float(value), 4)
