@@ -147,9 +147,10 @@ def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation]) -> 
 
 
 def markdown_ablations(records: list[dict[str, Any]], reference_aps: dict[str, dict[str, float | None]]) -> str:
-    """The ablations' table: AP per band of the ablation row and its reference, and the difference
-    [95 % interval] in AP points."""
-    lines = ["| ablation | change | band | AP ablation | AP reference | ablation − reference [95 % interval] | reading |",
+    """The ablations' table: AP per band of the ablation row and its reference (means over seeds), and
+    the paired difference of their first seeds [95 % interval], in AP points."""
+    lines = ["| ablation | change | band | AP ablation (seed mean) | AP reference (seed mean) | "
+             "ablation − reference, first seeds [95 % interval] | reading |",
              "|---|---|---|--:|--:|--:|---|"]
     for record in records:
         for band in (*RANGE_BANDS, "all"):
