@@ -64,8 +64,8 @@ MAX_POS_WEIGHT = 100.0
 #: Intra-op threads while training, whatever the machine's core count: a convolution's weight
 #: gradient sums over the batch in per-thread partial sums, whose number (and so the rounding)
 #: follows the thread count (1 and 2 threads give other weights after 3 steps). One: at the demo
-#: config's widths a second thread makes training only 1.3x faster, while two single-threaded
-#: trainings side by side (``zendar-bench``'s worker processes) run each at full speed.
+#: config's widths two one-thread trainings side by side (``zendar-bench``'s worker processes) finish
+#: sooner than the two one after the other on 2 threads (benchmarks/bench_seed_workers.py).
 TRAINING_THREADS = 1
 #: The widest vector instructions oneDNN's convolutions may use. oneDNN picks its kernels, and with
 #: them the summation order, by the CPU's vector width: unpinned, an AVX-512 and an AVX2 CPU train to

@@ -18,6 +18,7 @@ import errno
 import os
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -144,6 +145,9 @@ def run_cli(body: Callable[[], int | None]) -> int:
             status = body()
         sys.stdout.flush()  # a closed pipe surfaces here, not at interpreter exit
     except KeyboardInterrupt:
+        # Ctrl-C inside zarr's asynchronous writes leaves coroutines never awaited; their warnings at
+        # garbage collection would follow the one line a user should see last.
+        warnings.filterwarnings("ignore", message="coroutine .* was never awaited", category=RuntimeWarning)
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BaseException as exc:  # noqa: BLE001 - every exception ends as a message and a status
