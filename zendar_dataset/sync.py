@@ -3,7 +3,7 @@
 All streams are stamped by one GPS clock (int64 ns). For each reference frame a
 stream contributes either
 
-* its **nearest** element within a tolerance (``pandas.merge_asof``,
+* its **nearest** element within a tolerance (the indices of ``pandas.merge_asof``,
   ``direction="nearest"``; ``|Δt| <= tolerance`` is inclusive, ties go to the
   earlier element), or
 * for windowed streams (radar cubes), the **K latest** elements with
@@ -142,13 +142,24 @@ def resolve_tolerances_ns(
 
 
 def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int) -> np.ndarray:
-    """Index of the nearest stream element within tolerance per reference time, or MISSING."""
+    """Index of the nearest stream element within tolerance per reference time, or MISSING.
+
+    ``pandas.merge_asof(direction="nearest", tolerance=...)`` gives these indices (the tests check
+    it), but builds two DataFrames and a float column per call: 18 ms of a 1-hour scene's 20 ms index
+    (benchmarks/bench_sync.py). The stream is sorted and unique (:class:`StreamTimes`), so the
+    candidates are the elements either side of each reference time; the earlier wins a tie.
+    """
     if stream_ns.size == 0:
         return np.full(reference_ns.shape, MISSING, dtype=np.int64)
-    left = pd.DataFrame({"timestamp_ns": reference_ns})
-    right = pd.DataFrame({"timestamp_ns": stream_ns, "element": np.arange(stream_ns.size, dtype=np.int64)})
-    merged = pd.merge_asof(left, right, on="timestamp_ns", direction="nearest", tolerance=tolerance_ns)
-    return merged["element"].fillna(MISSING).to_numpy(dtype=np.int64)
+    if stream_ns.size == 1:
+        return np.where(np.abs(stream_ns[0] - reference_ns) <= tolerance_ns, 0, MISSING).astype(np.int64)
+    after = np.clip(np.searchsorted(stream_ns, reference_ns, side="left"), 1, stream_ns.size - 1)
+    before = after - 1
+    to_before = reference_ns - stream_ns[before]  # negative only before the stream's first element
+    to_after = stream_ns[after] - reference_ns  # negative only after its last
+    take_before = to_before <= to_after
+    distance = np.abs(np.where(take_before, to_before, to_after))
+    return np.where(distance <= tolerance_ns, np.where(take_before, before, after), MISSING).astype(np.int64)
 
 
 def _inside_span(reference_ns: np.ndarray, stream_ns: np.ndarray) -> np.ndarray:
@@ -402,15 +413,17 @@ def build_sync_table(
         dropped[group] = int(reference_ns.size)
 
     kept = np.flatnonzero(keep)
-    kept_ns = reference_ns[kept]
+    every_frame_kept = kept.size == reference_ns.size
+    kept_ns = reference_ns if every_frame_kept else reference_ns[kept]
     dt_ns: dict[str, np.ndarray] = {}
     for stream in streams:
-        idx = element[stream.name][kept]
+        idx = element[stream.name] if every_frame_kept else element[stream.name][kept]
         element[stream.name] = idx
+        if stream.timestamp_ns.size == 0:
+            dt_ns[stream.name] = np.zeros(idx.shape, dtype=np.int64)
+            continue
         matched = idx != MISSING
-        dt = np.zeros(idx.shape, dtype=np.int64)
-        dt[matched] = stream.timestamp_ns[idx[matched]] - kept_ns[matched]
-        dt_ns[stream.name] = dt
+        dt_ns[stream.name] = np.where(matched, stream.timestamp_ns[np.where(matched, idx, 0)] - kept_ns, 0)
     return SyncTable(
         reference=reference.name,
         reference_index=kept.astype(np.int64),

@@ -168,3 +168,26 @@ def test_equidistant_tie_goes_to_the_earlier_element():
     table = build_sync_table(ref, [camera], tolerance_ms=5.0)
     np.testing.assert_array_equal(table.element["camera/front"], [0])
     np.testing.assert_array_equal(table.dt_ns["camera/front"], [-5 * MS])
+
+
+@pytest.mark.parametrize("n_stream", [1, 2, 7, 400])
+def test_nearest_indices_are_those_of_pandas_merge_asof(n_stream):
+    """The package finds the nearest element with searchsorted; pandas' merge_asof (nearest, inclusive
+    tolerance) is the independent reference: references before, inside and after the stream, exact
+    hits and exact ties between two elements."""
+    rng = np.random.default_rng(n_stream)
+    stream_ns = T0 + np.sort(rng.choice(10_000, size=n_stream, replace=False)).astype(np.int64) * 2 * MS
+    ref_ns = np.sort(np.concatenate([
+        T0 + rng.integers(-2_000, 22_000, size=300) * MS,  # around and beyond the stream
+        stream_ns[: min(5, n_stream)],  # exact hits
+        (stream_ns[:-1] + stream_ns[1:])[:5] // 2,  # exact ties (the elements are an even number of ms apart)
+    ]))
+    left = pd.DataFrame({"timestamp_ns": np.unique(ref_ns)})
+    right = pd.DataFrame({"timestamp_ns": stream_ns, "element": np.arange(n_stream)})
+    for tolerance_ns in (3 * MS, 100_000 * MS):  # a few matches; every reference matched, ties decided
+        table = build_sync_table(StreamTimes("sar/left", np.unique(ref_ns)), [StreamTimes("camera/front", stream_ns)],
+                                 tolerance_ms=tolerance_ns / MS)
+        merged = pd.merge_asof(left, right, on="timestamp_ns", direction="nearest", tolerance=tolerance_ns)
+        expected = merged["element"].fillna(MISSING).to_numpy(np.int64)
+        np.testing.assert_array_equal(table.element["camera/front"], expected)
+        assert (expected != MISSING).any()
