@@ -16,7 +16,7 @@ from pathlib import Path
 
 from zendar_dataset.cli.arguments import positive_number, whole_number
 from zendar_dataset.cli.common import run_cli
-from zendar_dataset.cli.interrupt import exit_while_starting
+from zendar_dataset.cli.interrupt import console_script
 from zendar_dataset.errors import ZendarError
 
 EXIT_ENVIRONMENT = 1
@@ -242,9 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(body)
 
 
+@console_script
 def zendar_leaderboard() -> int:
     """Console script ``zendar-leaderboard``: Ctrl-C exits 130 from the start, imports included."""
-    exit_while_starting()
     return main()
 
 

@@ -11,7 +11,7 @@ import argparse
 import sys
 
 from zendar_dataset.cli.common import run_cli
-from zendar_dataset.cli.interrupt import exit_while_starting
+from zendar_dataset.cli.interrupt import console_script
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -43,9 +43,9 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(lambda: args.func(args))
 
 
+@console_script
 def zendar_data() -> int:
     """Console script ``zendar-data``: Ctrl-C exits 130 from the start, imports included."""
-    exit_while_starting()
     return main()
 
 

@@ -7,7 +7,7 @@ import sys
 
 from zendar_dataset.cli.arguments import positive_number, whole_number
 from zendar_dataset.cli.common import run_cli, writing
-from zendar_dataset.cli.interrupt import exit_while_starting
+from zendar_dataset.cli.interrupt import console_script
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -127,9 +127,9 @@ def main(argv: list[str] | None = None) -> int:
     return run_cli(lambda: _run(args))
 
 
+@console_script
 def zendar_eval() -> int:
     """Console script ``zendar-eval``: Ctrl-C exits 130 from the start, imports included."""
-    exit_while_starting()
     return main()
 
 

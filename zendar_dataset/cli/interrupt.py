@@ -11,9 +11,12 @@ and unblock SIGINT, so a disposition inherited from the parent (ignored under
 
 Each console script's function (``zendar_dataset.cli.data.zendar_data``,
 ``zendar_dataset.cli.eval.zendar_eval``, ``zendar_baselines.entry.zendar_bench``,
-``zendar_leaderboard.cli.zendar_leaderboard``) calls :func:`exit_while_starting`
-first, in a module that imports nothing heavy, so the start-up handler is in
-place before the heavy imports.
+``zendar_leaderboard.cli.zendar_leaderboard``) is wrapped in :func:`console_script`,
+in a module that imports nothing heavy, so the start-up handler is in place
+before the heavy imports. A third phase begins when the command returns: its
+exit status is decided, and Ctrl-C is ignored while the interpreter shuts down
+(Python puts SIGINT back to its default as it finalises, so a late Ctrl-C would
+otherwise kill the process by signal instead of letting the status stand).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ import logging
 import os
 import signal
 import threading
-from collections.abc import Iterator
+import functools
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 EXIT_INTERRUPTED = 130
@@ -55,6 +59,20 @@ def exit_while_starting() -> None:
     """Make Ctrl-C exit with status 130 at once (for the start-up of a command-line tool)."""
     if threading.current_thread() is threading.main_thread():
         _install(_exit_at_once)
+
+
+def console_script(main: Callable[[], int]) -> Callable[[], int]:
+    """Wrap a console script's function in the three Ctrl-C phases of the module docstring."""
+
+    @functools.wraps(main)
+    def run() -> int:
+        exit_while_starting()
+        status = main()
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        return status
+
+    return run
 
 
 @contextmanager
@@ -100,4 +118,4 @@ def _quiet_abandoned_io() -> None:
     logging.getLogger("asyncio").setLevel(logging.CRITICAL + 1)
 
 
-__all__ = ["EXIT_INTERRUPTED", "exit_while_starting", "interrupts_raise"]
+__all__ = ["EXIT_INTERRUPTED", "console_script", "exit_while_starting", "interrupts_raise"]
