@@ -325,18 +325,23 @@ def cuda_rows(batch: int, repeat: int) -> list[Row]:
     return rows
 
 
+CPU_ROWS = {"range-doppler": range_doppler_rows, "cfar": cfar_rows, "doa": doa_rows}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=30)
     parser.add_argument("--device", choices=("cpu", "cuda"), default="cpu")
     parser.add_argument("--batch", type=int, default=64)
+    parser.add_argument("--only", choices=sorted(CPU_ROWS), help="one group of CPU rows (default: all)")
     args = parser.parse_args()
     print_environment(("numpy", "scipy", "numba", "openradar"))
     rng = np.random.default_rng(0)
     if args.device == "cuda":
         rows = cuda_rows(args.batch, args.repeat)
     else:
-        rows = range_doppler_rows(rng, args.repeat) + cfar_rows(rng, args.repeat) + doa_rows(rng, args.repeat)
+        groups = [args.only] if args.only else list(CPU_ROWS)
+        rows = [row for group in groups for row in CPU_ROWS[group](rng, args.repeat)]
     # numpy and scipy may each load a BLAS of their own, with the same thread count.
     blas = max((pool["num_threads"] for pool in threadpoolctl.threadpool_info() if pool["user_api"] == "blas"), default=1)
     print(f"threads: range-Doppler, package and plain scipy.fft, workers=-1 ({os.cpu_count()}); CFAR: package "
