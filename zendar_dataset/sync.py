@@ -20,6 +20,7 @@ capture jitter, while a missing element, a gap of two intervals, still shows).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -66,9 +67,10 @@ class StreamTimes:
                 f"{self.name}: timestamp_ns must be a 1-D int64 array, got {t.dtype} {list(t.shape)}"
             )
         if t.size > 1:
-            bad = np.flatnonzero(np.diff(t) <= 0)
-            if bad.size:
-                k = int(bad[0])
+            # One byte per element (a fresh int64 diff of an hour's tracklog costs more than the index).
+            not_after = t[1:] <= t[:-1]
+            if not_after.any():
+                k = int(np.argmax(not_after))
                 raise ZendarFormatError(
                     f"{self.name}/timestamp_ns: must be strictly increasing; element {k + 1} "
                     f"({int(t[k + 1])}) does not follow element {k} ({int(t[k])})"
@@ -79,12 +81,39 @@ class StreamTimes:
             raise ValueError(f"{self.name}: a stream is either windowed or interpolated")
         object.__setattr__(self, "timestamp_ns", t.astype(np.int64, copy=False))
 
+    @functools.cached_property
+    def median_interval_ns(self) -> int | None:
+        """Median spacing in ns, or None with fewer than two elements; computed once per stream."""
+        return median_interval_ns(self.timestamp_ns)
+
 
 def median_interval_ns(timestamp_ns: np.ndarray) -> int | None:
-    """Median spacing of a stream in ns, or None with fewer than two elements."""
+    """Median spacing of a stream in ns (``int(np.median(np.diff(t)))``), or None with fewer than two elements."""
     if len(timestamp_ns) < 2:
         return None
-    return int(np.median(np.diff(timestamp_ns)))
+    return int(_median_consuming(np.diff(timestamp_ns)))
+
+
+def _median_consuming(values: np.ndarray) -> float:
+    """``np.median`` of a 1-D integer array that the caller gives up (it is reordered or shifted in place).
+
+    Working in place saves the copies ``np.median`` makes, and fresh arrays are costly
+    here (page faults on every new megabyte). A fixed-rate clock (the 100 Hz tracklog)
+    gives intervals of a few distinct values, on which a partition is slow: values that
+    span less than their count are counted instead (an hour of the tracklog: 0.7 against
+    4.6 ms, the largest part of building the index, benchmarks/bench_sync.py).
+    """
+    n = values.size
+    if n == 0:
+        return float(np.median(values))
+    smallest, largest = int(values.min()), int(values.max())
+    if largest - smallest >= n:
+        return float(np.median(values, overwrite_input=True))
+    values -= smallest
+    cumulative = np.cumsum(np.bincount(values))
+    lower, upper = np.searchsorted(cumulative, [(n - 1) // 2, n // 2], side="right")
+    # As np.median: the mean of the two middle values in float64 (one value when n is odd).
+    return (float(smallest + int(lower)) + float(smallest + int(upper))) / 2
 
 
 def resolve_tolerances_ns(
@@ -120,7 +149,6 @@ def resolve_tolerances_ns(
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not value >= 0:
             raise ValueError(f"tolerances must be non-negative numbers of ms, got {value!r}")
 
-    reference_interval = median_interval_ns(reference_ns)
     tolerances: dict[str, int] = {}
     for stream in streams:
         if stream.interpolated:
@@ -134,41 +162,52 @@ def resolve_tolerances_ns(
         if chosen is not None:
             tolerances[stream.name] = int(round(float(chosen) * 1e6))
             continue
-        interval = median_interval_ns(stream.timestamp_ns)
-        if interval is None:
-            interval = reference_interval if reference_interval is not None else 0
+        interval = stream.median_interval_ns
+        if interval is None:  # one element or none: the reference's spacing stands in
+            interval = median_interval_ns(reference_ns) or 0
         tolerances[stream.name] = (3 * interval) // 2 if stream.window else interval // 2
     return tolerances
 
 
-def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int) -> np.ndarray:
-    """Index of the nearest stream element within tolerance per reference time, or MISSING.
+def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest stream element within tolerance per reference time (or MISSING) and its Δt.
 
     ``pandas.merge_asof(direction="nearest", tolerance=...)`` gives these indices (the tests check
     it), but builds two DataFrames and a float column per call: 18 ms of a 1-hour scene's 20 ms index
     (benchmarks/bench_sync.py). The stream is sorted and unique (:class:`StreamTimes`), so the
     candidates are the elements either side of each reference time; the earlier wins a tie.
+    Δt is ``element − reference`` in ns, 0 where MISSING.
     """
     if stream_ns.size == 0:
-        return np.full(reference_ns.shape, MISSING, dtype=np.int64)
+        return np.full(reference_ns.shape, MISSING, dtype=np.int64), np.zeros(reference_ns.shape, dtype=np.int64)
+    after = np.searchsorted(stream_ns, reference_ns, side="left")
     if stream_ns.size == 1:
-        return np.where(np.abs(stream_ns[0] - reference_ns) <= tolerance_ns, 0, MISSING).astype(np.int64)
-    after = np.clip(np.searchsorted(stream_ns, reference_ns, side="left"), 1, stream_ns.size - 1)
-    before = after - 1
-    to_before = reference_ns - stream_ns[before]  # negative only before the stream's first element
-    to_after = stream_ns[after] - reference_ns  # negative only after its last
-    take_before = to_before <= to_after
-    distance = np.abs(np.where(take_before, to_before, to_after))
-    return np.where(distance <= tolerance_ns, np.where(take_before, before, after), MISSING).astype(np.int64)
+        after[:] = 0
+        index, dt_ns = after, stream_ns[0] - reference_ns
+    else:
+        np.clip(after, 1, stream_ns.size - 1, out=after)
+        before = after - 1
+        to_before = reference_ns - stream_ns[before]  # negative only before the stream's first element
+        dt_ns = stream_ns[after] - reference_ns  # negative only after its last
+        take_before = to_before <= dt_ns
+        np.copyto(after, before, where=take_before)
+        np.negative(to_before, out=dt_ns, where=take_before)
+        index = after
+    far = np.abs(dt_ns) > tolerance_ns
+    np.copyto(index, MISSING, where=far)
+    np.copyto(dt_ns, 0, where=far)
+    return index, dt_ns
 
 
-def _inside_span(reference_ns: np.ndarray, stream_ns: np.ndarray) -> np.ndarray:
-    """Nearest sample (any distance) where the reference lies inside the stream's span, else MISSING."""
+def _inside_span(reference_ns: np.ndarray, stream_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest sample (any distance) where the reference lies inside the stream's span (else MISSING) and its Δt."""
     if stream_ns.size == 0:
-        return np.full(reference_ns.shape, MISSING, dtype=np.int64)
-    idx = _nearest(reference_ns, stream_ns, int(stream_ns[-1] - stream_ns[0]) + 1)
-    inside = (reference_ns >= stream_ns[0]) & (reference_ns <= stream_ns[-1])
-    return np.where(inside, idx, MISSING).astype(np.int64)
+        return _nearest(reference_ns, stream_ns, 0)
+    index, dt_ns = _nearest(reference_ns, stream_ns, int(stream_ns[-1] - stream_ns[0]) + 1)
+    outside = (reference_ns < stream_ns[0]) | (reference_ns > stream_ns[-1])
+    np.copyto(index, MISSING, where=outside)
+    np.copyto(dt_ns, 0, where=outside)
+    return index, dt_ns
 
 
 def latest_at_or_before(stream_ns: np.ndarray, reference_ns: np.ndarray | int) -> np.ndarray:
@@ -190,16 +229,18 @@ def latest_at_or_before(stream_ns: np.ndarray, reference_ns: np.ndarray | int) -
     return (np.searchsorted(stream_ns, reference_ns, side="right") - 1).astype(np.int64)
 
 
-def _latest(reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolerance_ns: int) -> np.ndarray:
-    """Index of the latest element of a filled window per reference time, or MISSING."""
+def _latest(
+    reference_ns: np.ndarray, stream_ns: np.ndarray, window: int, tolerance_ns: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the latest element of a filled window per reference time (or MISSING) and its Δt (0 where MISSING)."""
     last = latest_at_or_before(stream_ns, reference_ns)
-    filled = last >= window - 1
-    safe = np.clip(last, 0, None)
-    if stream_ns.size:
-        filled &= (reference_ns - stream_ns[safe]) <= tolerance_ns
-    else:
-        filled[:] = False
-    return np.where(filled, last, MISSING).astype(np.int64)
+    if stream_ns.size == 0:
+        return np.full(reference_ns.shape, MISSING, dtype=np.int64), np.zeros(reference_ns.shape, dtype=np.int64)
+    dt_ns = stream_ns[np.clip(last, 0, None)] - reference_ns
+    unfilled = (last < window - 1) | (-dt_ns > tolerance_ns)
+    np.copyto(last, MISSING, where=unfilled)
+    np.copyto(dt_ns, 0, where=unfilled)
+    return last, dt_ns
 
 
 class SyncReport(pd.DataFrame):
@@ -390,16 +431,18 @@ def build_sync_table(
             raise ValueError(f"require names unknown stream {key!r}; known: {sorted(set(names) | groups)}")
 
     element: dict[str, np.ndarray] = {}
+    dt_ns: dict[str, np.ndarray] = {}
     keep = np.ones(reference_ns.shape, dtype=bool)
     lacking: dict[str, np.ndarray] = {}
     for stream in streams:
         if stream.interpolated:
-            idx = _inside_span(reference_ns, stream.timestamp_ns)
+            idx, dt = _inside_span(reference_ns, stream.timestamp_ns)
         elif stream.window:
-            idx = _latest(reference_ns, stream.timestamp_ns, stream.window, tolerances[stream.name])
+            idx, dt = _latest(reference_ns, stream.timestamp_ns, stream.window, tolerances[stream.name])
         else:
-            idx = _nearest(reference_ns, stream.timestamp_ns, tolerances[stream.name])
+            idx, dt = _nearest(reference_ns, stream.timestamp_ns, tolerances[stream.name])
         element[stream.name] = idx
+        dt_ns[stream.name] = dt
         must_have = stream.name in required or (stream.window and not keep_unfilled_windows)
         if must_have:
             lacking[stream.name] = idx == MISSING
@@ -415,15 +458,10 @@ def build_sync_table(
     kept = np.flatnonzero(keep)
     every_frame_kept = kept.size == reference_ns.size
     kept_ns = reference_ns if every_frame_kept else reference_ns[kept]
-    dt_ns: dict[str, np.ndarray] = {}
-    for stream in streams:
-        idx = element[stream.name] if every_frame_kept else element[stream.name][kept]
-        element[stream.name] = idx
-        if stream.timestamp_ns.size == 0:
-            dt_ns[stream.name] = np.zeros(idx.shape, dtype=np.int64)
-            continue
-        matched = idx != MISSING
-        dt_ns[stream.name] = np.where(matched, stream.timestamp_ns[np.where(matched, idx, 0)] - kept_ns, 0)
+    if not every_frame_kept:
+        for name in names:
+            element[name] = element[name][kept]
+            dt_ns[name] = dt_ns[name][kept]
     return SyncTable(
         reference=reference.name,
         reference_index=kept.astype(np.int64),

@@ -191,3 +191,29 @@ def test_nearest_indices_are_those_of_pandas_merge_asof(n_stream):
         expected = merged["element"].fillna(MISSING).to_numpy(np.int64)
         np.testing.assert_array_equal(table.element["camera/front"], expected)
         assert (expected != MISSING).any()
+
+
+def _median_cases():
+    rng = np.random.default_rng(21)
+    jittered = (1e7 + rng.uniform(-5e5, 5e5, 360_000)).astype(np.int64)
+    yield "100 Hz hour, jittered", jittered
+    yield "odd length", jittered[:100_001]
+    yield "a fixed-rate clock's two intervals", rng.choice(np.array([9_999_872, 10_000_128]), 360_000)
+    yield "few distinct values", rng.integers(-3, 3, 50_000)
+    yield "two plateaus", np.r_[np.zeros(5_000, np.int64), np.full(5_001, 10**12)]
+    yield "sorted descending", np.sort(rng.integers(0, 2**40, 20_000))[::-1].copy()
+    # Every sampled value (1 in 64) is an outlier: the sample's bracket misses the median.
+    misleading = rng.integers(0, 100, 64 * 200)
+    misleading[::64] = 10**9
+    yield "sample misleads", misleading
+    yield "short", rng.integers(0, 10, 11)
+
+
+@pytest.mark.parametrize("case", list(_median_cases()), ids=lambda case: case[0])
+def test_median_interval_equals_numpy_median_of_the_intervals(case):
+    from zendar_dataset.sync import _median_consuming, median_interval_ns
+
+    _, values = case
+    assert _median_consuming(values.copy()) == np.median(values)
+    timestamps = np.cumsum(np.abs(values) + 1)
+    assert median_interval_ns(timestamps) == int(np.median(np.diff(timestamps)))
