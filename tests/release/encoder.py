@@ -181,3 +181,8 @@ def chirp_response(timestamp: float, iq_words: np.ndarray, frame: int, chirp_ind
     """ChirpResponse (raw ADC): 1 timestamp, 2-5 rx0-rx3 IQ {3: packed fixed32 IQ}, 6 idx_frame, 8 chirp_index (int32)."""
     iq = ld(3, np.ascontiguousarray(iq_words, "<u4").tobytes())
     return ld(1, time_record(timestamp)) + b"".join(ld(n, iq) for n in (2, 3, 4, 5)) + uvar(6, frame) + uvar(7, 0) + uvar(8, chirp_index)
+
+
+def time_index(common_time: float, file_offset: int) -> bytes:
+    """TimeIndex (an index file's record): 1 common_time double, 2 file_offset uint64; no converted kind has this shape."""
+    return f64(1, common_time) + uvar(2, file_offset)

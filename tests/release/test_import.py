@@ -165,7 +165,7 @@ def test_tracklog_cubes_and_camera_index(imported):
     cube = reader.array("radar/left/cube")[2]
     assert cube.shape == (16, 8, 4) and np.argwhere(np.abs(cube[..., 0]) > 0).tolist() == [[5, 5]]
     assert reader.calibration.radar("left").range_bin_m == pytest.approx(0.176)
-    index = reader.array("camera_index/index/frame_index")[:]
+    index = reader.array("camera_index/camera/frame_index")[:]
     assert index.tolist() == list(range(30))
 
 
@@ -353,3 +353,42 @@ def test_doppler_axis_conventions(tmp_path, capsys, doppler_start, range_start, 
     # Format v1 puts zero velocity in bin D/2 = 4: the release's bin whose velocity is 0 m/s lands there.
     zero_velocity_bin = int(round(-doppler_start / 0.1))  # start + k * delta == 0
     np.testing.assert_array_equal(stored[:, 4], cube[:, zero_velocity_bin])
+
+
+@pytest.mark.parametrize("skip_corrupt", [False, True])
+def test_headerless_stream_of_unknown_messages_is_skipped_not_an_error(tmp_path, capsys, skip_corrupt):
+    src = tmp_path / "release"
+    build_release(src)
+    scene = src / "2020-02-03_2252" / "001"
+    enc.write_stream(scene / "index" / "stream.pbs", [enc.time_index(T0_S + k, 4096 * k) for k in range(6)], header=False)
+    flags = ["--skip-corrupt"] if skip_corrupt else []
+    status, stdout, err = run("import-release", src, tmp_path / "out", *flags, capsys=capsys)
+    assert status == 0, err
+    (line,) = [l for l in stdout.splitlines() if l.startswith("  2020-02-03_2252/001/index/stream.pbs")]
+    assert line.startswith("  2020-02-03_2252/001/index/stream.pbs: ?, 0 records")
+    after = stdout.split(line, 1)[1]
+    assert "no known message decodes it" in after.splitlines()[1] and "first mismatch" in after.splitlines()[1]
+    assert "lost" not in after.split("\n  20")[0]
+    reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
+    assert set(reader.sensors("sar")) == {"left", "right"}
+
+
+def test_camera_named_after_its_folder_apart_from_radars_and_pixel_evidence_in_db(tmp_path, capsys):
+    import re
+
+    src = tmp_path / "release"
+    build_release(src)
+    scene = src / "2020-02-03_2252" / "001"
+    (scene / "camera" / "left").mkdir()
+    (scene / "camera" / "index.pbs").rename(scene / "camera" / "left" / "index.pbs")
+    status, stdout, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 0, err
+    reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
+    assert "camera_index/camera_left" in reader.streams and "radar/left" in reader.streams
+    assert reader.array("camera_index/camera_left/frame_index")[:].tolist() == list(range(30))
+    evidence = [line for line in stdout.splitlines() if "pixel (i, j) is flat element" in line]
+    assert len(evidence) == 2
+    for line in evidence:
+        # One bright pixel per frame against a background of 0-9: capped, not "3.45e+73x".
+        assert re.search(r"checked, \d+ known points in \d+ frames: (> \+60|[+-]\d+\.\d) dB brighter", line), line
+        assert "e+" not in line

@@ -284,3 +284,25 @@ def test_unknown_kind_name_is_a_user_error(tmp_path):
     path = enc.write_stream(tmp_path / "vn200.pbs", [enc.position_record(1.26e9, ATT, POS, 1)])
     with pytest.raises(ZendarError, match="kind: expected one of .*'Position'.*, found 'Pose'"):
         ReleaseStream(path, kind="Pose")
+
+
+@pytest.mark.parametrize("header", [True, False])
+def test_sound_framing_with_unknown_content_is_unknown_not_truncated(tmp_path, header):
+    # Framing is decided by the length prefixes alone: an index file tiles the file, so it is an
+    # unknown message with the first mismatch, never "truncated or corrupt at byte offset 8".
+    from zendar_dataset.release.stream import UnknownMessageError
+
+    path = enc.write_stream(tmp_path / "index.pbs", [enc.time_index(1.26e9 + k, 1000 * k) for k in range(5)], header=header)
+    for skip_corrupt in (False, True):
+        with pytest.raises(UnknownMessageError, match="found none decodes") as info:
+            ReleaseStream(path, skip_corrupt=skip_corrupt)
+        assert "truncated" not in str(info.value)
+
+
+def test_truncated_stream_of_unknown_content_is_still_truncated(tmp_path):
+    data = enc.stream_bytes([enc.time_index(1.26e9 + k, k) for k in range(5)], header=False)
+    path = tmp_path / "index.pbs"
+    path.write_bytes(data[:-3])
+    last = 4 * (4 + len(enc.time_index(1.26e9, 0)))
+    with pytest.raises(ZendarFormatError, match=f"byte offset {last}.*only"):
+        ReleaseStream(path)

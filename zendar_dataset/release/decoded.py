@@ -4,15 +4,17 @@
 every unreadable stream is reported at once); :func:`decoded_records` is the one
 loop over a stream's records that every conversion consumes: it counts them,
 decodes them, and hands a record that does not decode to the stream (an error,
-or with ``--skip-corrupt`` a reported loss); :func:`finish_summary` copies what
-the reading found into the stream's summary.
+or with ``--skip-corrupt`` a reported loss), counts the fields the SDK's
+definitions do not have (accepted once the stream's kind is decided) and the
+records without an optional field their conversion needs (skipped);
+:func:`finish_summary` copies what the reading found into the stream's summary.
 """
 
 from __future__ import annotations
 
 import pathlib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 from zendar_dataset.errors import ZendarFormatError
@@ -33,6 +35,7 @@ class OpenedStream:
     stream: ReleaseStream | None
     summary: StreamSummary
     model: rec.RangeDopplerModel | None = None  # for single-message .pb model files
+    missing: dict[tuple[str, str], int] = field(default_factory=dict)  # (field, why) -> records skipped
 
 
 def open_stream(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> OpenedStream:
@@ -66,9 +69,9 @@ def open_stream(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, probl
     return OpenedStream(path, stream, summary)
 
 
-def message(kind: Kind, buf: memoryview, start: int, end: int) -> dict:
-    """One record as field name -> value (the strict generic decoder)."""
-    return decode(kind.message, buf, start, end)
+def message(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> dict:
+    """One record as field name -> value (the generic decoder; unknown fields counted in ``unknown``)."""
+    return decode(kind.message, buf, start, end, unknown)
 
 
 def decoded_records(
@@ -81,9 +84,9 @@ def decoded_records(
     opened
         A stream that :func:`open_stream` opened (its ``stream`` is not None).
     convert
-        Decodes one record ``(kind, buffer, start, end)``; :func:`message` by default, or
+        Decodes one record ``(kind, buffer, start, end, unknown=counts)``; :func:`message` by default, or
         :func:`zendar_dataset.release.records.detections` / :func:`~zendar_dataset.release.records.lidar_sweep`
-        (column-wise).
+        (column-wise) / :func:`~zendar_dataset.release.records.sar_frame_record`.
     probe
         A look-ahead pass: records are neither counted nor reported (the writing pass does both).
 
@@ -92,22 +95,35 @@ def decoded_records(
     What ``convert`` returns.  A record it cannot decode is skipped after
     :meth:`ReleaseStream.report_problem`, which raises :class:`ZendarFormatError`
     (naming the byte offset) or, with ``skip_corrupt``, records the bytes as lost.
+    A record without an optional field its conversion needs
+    (:class:`~zendar_dataset.release.records.MissingField`) is skipped and counted.
     """
     stream = opened.stream
+    unknown = {} if probe else stream.unknown_fields
     for offset, buf, start, end in stream.records():
         opened.summary.records += not probe
         try:
-            value = convert(stream.kind, buf, start, end)
+            value = convert(stream.kind, buf, start, end, unknown=unknown)
         except WireError as exc:
             if not probe:
                 stream.report_problem(offset, end - offset, f"record does not decode as {stream.kind.label}: {exc}")
+            continue
+        except rec.MissingField as exc:
+            if not probe:
+                key = (exc.field, exc.why)
+                opened.missing[key] = opened.missing.get(key, 0) + 1
             continue
         yield value
 
 
 def finish_summary(opened: OpenedStream) -> None:
-    """Copy into the stream's summary what reading found: empty records, and the bytes ``skip_corrupt`` skipped."""
+    """Copy into the stream's summary what reading found: empty records, records without a needed optional
+    field, fields the SDK's definitions lack, and the bytes ``skip_corrupt`` skipped."""
+    opened.summary.skipped.extend(
+        f"{n} records without {name} ({why}): not converted" for (name, why), n in opened.missing.items()
+    )
     if opened.stream is not None:
+        opened.summary.unknown_fields = dict(sorted(opened.stream.unknown_fields.items()))
         opened.summary.empty_records = opened.stream.empty_records
         opened.summary.lost_bytes = sum(loss.size_bytes for loss in opened.stream.losses)
         opened.summary.skipped.extend(

@@ -3,12 +3,18 @@
 Users reported one scene per ``<YYYY-MM-DD_HHMM>/<NNN>/`` folder (also
 flattened as ``<YYYY-MM-DD_HHMM>_<NNN>``), with streams in the folder and in
 sub-folders (``range_Doppler/left_rd.pbs``, ``lidar/00/stream.pbs``).  A
-stream belongs to the nearest such folder above it; streams under no such
-folder form one scene named after the source folder.
+stream belongs to the nearest such folder above it, looked for along the whole
+path (also above the source folder: one scene folder imported alone keeps its
+date); streams under no such folder form one scene named after the source folder.
+
+:func:`fingerprint` identifies a recording by its streams' content (not their
+paths), so that a re-import can tell a moved copy from a different recording.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
 import pathlib
 import re
 from dataclasses import dataclass, field
@@ -34,16 +40,12 @@ def is_stream_file(path: pathlib.Path) -> bool:
     return path.is_file() and path.name.lower().endswith(STREAM_SUFFIXES)
 
 
-def _scene_of(path: pathlib.Path, src: pathlib.Path) -> tuple[str, pathlib.Path] | None:
+def _scene_of(path: pathlib.Path) -> tuple[str, pathlib.Path] | None:
     for folder in path.parents:
-        if folder == src.parent:
-            break
         if _FLAT.match(folder.name):
             return folder.name, folder
-        if _NUMBER.match(folder.name) and _DATE_TIME.match(folder.parent.name) and folder.parent != src.parent:
+        if _NUMBER.match(folder.name) and _DATE_TIME.match(folder.parent.name):
             return f"{folder.parent.name}_{folder.name}", folder
-        if folder == src:
-            break
     return None
 
 
@@ -59,10 +61,37 @@ def find_scenes(src: pathlib.Path) -> list[SceneSource]:
     scenes: dict[str, SceneSource] = {}
     files = [src] if src.is_file() else sorted(p for p in src.rglob("*") if is_stream_file(p))
     for path in files:
-        found = _scene_of(path, src if src.is_dir() else src.parent)
+        found = _scene_of(path)
         if found is None:
             base = src if src.is_dir() else src.parent
             found = (scene_id_from_name(base.name), base)
         scene_id, folder = found
         scenes.setdefault(scene_id, SceneSource(scene_id, folder)).files.append(path)
     return [scenes[k] for k in sorted(scenes)]
+
+
+FINGERPRINT_SAMPLES = 16
+FINGERPRINT_SAMPLE_BYTES = 64 * 2**10
+
+
+def _file_digest(path: pathlib.Path) -> bytes:
+    """SHA-256 over the file's size and 16 evenly spaced 64 KiB samples (first and last included), or all
+    of it when that is no more (reading whole multi-GB scenes would cost more than the import's check is worth)."""
+    size = path.stat().st_size
+    digest = hashlib.sha256(str(size).encode())
+    with open(path, "rb") as handle:
+        if size <= FINGERPRINT_SAMPLES * FINGERPRINT_SAMPLE_BYTES:
+            digest.update(handle.read())
+        else:
+            last = size - FINGERPRINT_SAMPLE_BYTES
+            for k in range(FINGERPRINT_SAMPLES):
+                handle.seek(last * k // (FINGERPRINT_SAMPLES - 1), os.SEEK_SET)
+                digest.update(handle.read(FINGERPRINT_SAMPLE_BYTES))
+    return digest.digest()
+
+
+def fingerprint(files: list[pathlib.Path]) -> str:
+    """``sha256:<hex>`` of a scene's stream files by content: their per-file digests, sorted (so
+    neither the files' paths nor their order count; a moved or renamed copy has the same fingerprint)."""
+    combined = hashlib.sha256(b"".join(sorted(_file_digest(path) for path in files)))
+    return f"sha256:{combined.hexdigest()}"

@@ -23,13 +23,14 @@ import numpy as np
 
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError, ZendarFormatError
+from zendar_dataset.format import stores
 from zendar_dataset.format.schema import DATASET_JSON, SPLITS
 from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
 from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
-from zendar_dataset.release.discover import SceneSource, find_scenes
+from zendar_dataset.release.discover import SceneSource, find_scenes, fingerprint
 from zendar_dataset.release.pixel_order import vote_pixel_order
 from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
 from zendar_dataset.release.wire import WireError
@@ -41,9 +42,8 @@ def _prefix(path: pathlib.Path, suffix: str) -> str | None:
 
 
 def _sar_frames(opened: OpenedStream, probe: bool = False) -> Iterator[rec.SarFrame]:
-    """The SAR frames of an ``Image`` stream (:func:`decoded_records`)."""
-    for record in decoded_records(opened, probe=probe):
-        yield rec.sar_frame(opened.stream.kind, record)
+    """The SAR frames of an ``Image`` stream (:func:`decoded_records`; records without an image are counted)."""
+    yield from decoded_records(opened, rec.sar_frame_record, probe=probe)
 
 
 class _Stamps:
@@ -79,8 +79,11 @@ def _tracklog(opened: list[OpenedStream], scene: SceneSummary):
     _, offsets, lengths = first.stream.spans()
     try:
         # Column-wise: a tracklog has hundreds of thousands of records of one layout.
-        seconds, position, attitude = rec.poses(first.stream.buffer, offsets, lengths)
+        unknown: dict[str, int] = {}
+        seconds, position, attitude = rec.poses(first.stream.buffer, offsets, lengths, unknown)
         first.summary.records += offsets.shape[0]
+        for name, count in unknown.items():
+            first.stream.unknown_fields[name] = first.stream.unknown_fields.get(name, 0) + count
     except WireError:
         # Some record does not decode: go record by record, so each is reported (or skipped) where it is.
         decoded = [rec.pose(record) for record in decoded_records(first)]
@@ -112,9 +115,9 @@ def _tracklog(opened: list[OpenedStream], scene: SceneSummary):
 class _SceneImport:
     """Everything about importing one scene; :meth:`run` writes it."""
 
-    def __init__(self, source: SceneSource, src: pathlib.Path, skip_corrupt: bool, problems: list[str]) -> None:
+    def __init__(self, source: SceneSource, src: pathlib.Path, skip_corrupt: bool, problems: list[str], digest: str) -> None:
         self.source = source
-        self.summary = SceneSummary(source.scene_id, str(source.folder))
+        self.summary = SceneSummary(source.scene_id, str(source.folder), fingerprint=digest)
         self.opened = [open_stream(path, src, skip_corrupt, problems) for path in source.files]
         self.summary.streams = [o.summary for o in self.opened]
 
@@ -144,7 +147,7 @@ class _SceneImport:
         for radar in radars:
             calibration[radar] = assume.radar_entry(radar, models.get(radar), scene.assumptions, radar in assumed_models)
         lidars = self._keyed(self._by_kind("LidarPointsFrame"), "")
-        cameras = self._keyed(self._by_kind("CameraIndexRecord"), "")
+        cameras = self._keyed(self._by_kind("CameraIndexRecord"), "", camera=True)
         for name in list(lidars) + list(cameras):
             calibration[name] = assume.sensor_entry(name, scene.assumptions)
         enu_origin = assume.enu_origin(
@@ -169,14 +172,31 @@ class _SceneImport:
                 self._write_camera_index(out, name, opened)
             for opened in self.opened:
                 finish_summary(opened)
-            out.write_attrs("", {"release_import": {"source": str(self.source.folder), "assumptions": scene.assumptions}})
+            out.write_attrs(
+                "",
+                {
+                    "release_import": {
+                        "source": str(self.source.folder),
+                        "fingerprint": scene.fingerprint,
+                        "assumptions": scene.assumptions,
+                    }
+                },
+            )
 
-    def _keyed(self, opened: list[OpenedStream], suffix: str) -> dict[str, OpenedStream]:
-        """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name."""
+    def _keyed(self, opened: list[OpenedStream], suffix: str, camera: bool = False) -> dict[str, OpenedStream]:
+        """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name.
+
+        Cameras are named after their folders (``camera/left/index.pbs`` -> ``camera_left``), always starting
+        with ``camera`` so that no camera takes a radar's name in the scene's shared sensor names.
+        """
         out: dict[str, OpenedStream] = {}
         for item in opened:
             name = _prefix(item.path, suffix) if suffix else None
-            if name is None:
+            if camera:
+                folders = "_".join(item.path.relative_to(self.source.folder).parts[:-1])
+                name = folders or item.path.name.split(".")[0]
+                name = name if name.lower().startswith("camera") else f"camera_{name}"
+            elif name is None:
                 stem = item.path.name.split(".")[0]
                 # Raw-acquisition layout: <sensor>/<NN>/stream.pbs is named by its folders.
                 folders = "_".join(item.path.relative_to(self.source.folder).parts[:-1])
@@ -379,6 +399,15 @@ def _existing_splits(out: pathlib.Path) -> dict[str, list[str]]:
         ) from None
 
 
+def _imported_from(scene_path: pathlib.Path) -> dict:
+    """The ``release_import`` attribute of a scene written earlier (empty when it has none)."""
+    store = stores.open_store(scene_path)
+    try:
+        return stores.read_attrs(store.root).get("release_import") or {}
+    finally:
+        store.close()
+
+
 def import_release(
     src: str | os.PathLike,
     out: str | os.PathLike,
@@ -436,13 +465,24 @@ def import_release(
     problems: list[str] = []
     try:
         for source in scenes:
-            if writer.scene_path(source.scene_id).exists():
-                done = SceneSummary(source.scene_id, str(source.folder), status="already imported")
+            digest = fingerprint(source.files)
+            existing = writer.scene_path(source.scene_id)
+            if existing.exists():
+                earlier = _imported_from(existing)
+                recorded = earlier.get("fingerprint")
+                if recorded is not None and recorded != digest:
+                    problems.append(
+                        f"{existing}: scene {source.scene_id!r} already holds a different recording "
+                        f"(imported from {earlier.get('source')}; {source.folder} differs in content); "
+                        "import it into another OUT or give it another --scene-id"
+                    )
+                    continue
+                done = SceneSummary(source.scene_id, str(source.folder), status="already imported", fingerprint=recorded)
                 summary.scenes.append(done)
                 continue
-            imports.append(_SceneImport(source, base, skip_corrupt, problems))
+            imports.append(_SceneImport(source, base, skip_corrupt, problems, digest))
         if problems:
-            raise ZendarFormatError(f"{src_path}: {len(problems)} unreadable streams: " + "; ".join(problems), problems)
+            raise ZendarFormatError(f"{src_path}: {len(problems)} problems: " + "; ".join(problems), problems)
         for job in imports:
             if log:
                 log(job.source.scene_id)

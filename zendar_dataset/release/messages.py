@@ -8,6 +8,13 @@ the 2021 ``Metadata``-based forms of ``Image`` and ``TrackerState``, the
 January-2021 draft lidar point layout, and the raw-acquisition messages
 (recognised so that they can be reported, not converted).
 
+Required fields are the SDK's ``required`` ones or fewer, never a field the SDK
+declares ``optional`` or places in a ``oneof`` (``Image.cartesian``, the 2021
+``meta``, ``ChirpResponse.rx0``): a record the SDK reads is never rejected here.
+Where the SDK requires a field the importer can do without (``Image.attitude``
+and ``position``, ``ImageDataCartesian.type`` in the 2021 packages), it is not
+required here either.
+
 A :class:`Kind` is one message type in one generation; sniffing a stream
 (``release/stream.py``) keeps the kinds that decode its first records strictly.
 """
@@ -47,7 +54,7 @@ IMAGE_DATA = _msg("ImageDataCartesian", (2, 3), f1=("type", UINT), f2=("rows", U
 IMAGE_CARTESIAN = _msg("ImageCartesian", (1, 2), f1=("model", IMAGE_MODEL), f2=("data", IMAGE_DATA))
 IMAGE_2020 = _msg(
     "Image",
-    (1, 10),
+    (1,),
     f1=("timestamp", DOUBLE),
     f2=("attitude", QUATERNION),
     f3=("position", VEC3D),
@@ -56,7 +63,7 @@ IMAGE_2020 = _msg(
     f6=("serial", STRING),
     f10=("cartesian", IMAGE_CARTESIAN),
 )
-IMAGE_2021 = _msg("Image", (1, 10), f1=("meta", METADATA), f2=("performance", IMAGE_PERFORMANCE), f10=("cartesian", IMAGE_CARTESIAN))
+IMAGE_2021 = _msg("Image", (), f1=("meta", METADATA), f2=("performance", IMAGE_PERFORMANCE), f10=("cartesian", IMAGE_CARTESIAN))
 
 def _point(generation: str) -> Message:
     """``Point``: fields 3 and 10 keep their numbers and types but were renamed in 2021 (amplitude ->
@@ -90,7 +97,7 @@ TRACKER_STATE_2020 = _msg(
     f3=("frame_id", UINT),
     f4=("serial", STRING),
 )
-TRACKER_STATE_2021 = _msg("TrackerState", (1,), f1=("meta", METADATA), f2=("detection", POINT_2021, True))
+TRACKER_STATE_2021 = _msg("TrackerState", (), f1=("meta", METADATA), f2=("detection", POINT_2021, True))
 
 POSITION_QUALITY = _msg("PositionQuality", (), f1=("satellite_count", INT32), f2=("gps_status", UINT), f3=("ins_status", UINT))
 POSITION = _msg(
@@ -129,31 +136,53 @@ RD_FRAME = _msg("RangeDopplerFrame", (1, 2), f1=("timestamp", DOUBLE), f2=("data
 CAMERA_INDEX = _msg("CameraIndexRecord", (1, 2), f1=("timestamp", TIME_RECORD), f2=("frame_index", UINT))
 
 # Raw-acquisition messages: recognised for the summary, not converted.
-_OPAQUE = Message("Opaque", {n: Field(f"f{n}", BYTES) for n in range(1, 16)})
-LIDAR_RETURN = _msg("LidarReturn", (), f1=("distance", UINT), f2=("intensity", UINT))
+LIDAR_RETURN = _msg("LidarReturn", (1, 2), f1=("distance", UINT), f2=("intensity", UINT))
 LIDAR_FIRING = _msg(
-    "LidarFiringBlock", (), f2=("block_identifier", UINT), f3=("rotational_position", UINT), f4=("laser_returns", LIDAR_RETURN, True)
+    "LidarFiringBlock", (2, 3), f2=("block_identifier", UINT), f3=("rotational_position", UINT), f4=("laser_returns", LIDAR_RETURN, True)
 )
 LIDAR_DATA_FRAME = _msg(
     "LidarDataFrame",
-    (1, 2),
+    (3, 4),
     f1=("timestamp", TIME_RECORD),
     f2=("firings", LIDAR_FIRING, True),
     f3=("mode", UINT),
     f4=("sensor_type", UINT),
 )
+# IQ words are packed repeated (s)fixed32: one length-delimited field each. ChirpQuality's
+# repeated CQ0-CQ2 sub-messages are kept as bytes (never converted).
+IQ = _msg("IQ", (), f1=("I", BYTES), f2=("Q", BYTES), f3=("IQ", BYTES))
+CHIRP_QUALITY = _msg("ChirpQuality", (), f1=("cq0", BYTES, True), f2=("cq1", BYTES, True), f3=("cq2", BYTES, True))
 CHIRP_RESPONSE = _msg(
     "ChirpResponse",
-    (1, 2),
+    (1,),
     f1=("timestamp", TIME_RECORD),
-    f2=("rx0", _OPAQUE),
-    f3=("rx1", _OPAQUE),
-    f4=("rx2", _OPAQUE),
-    f5=("rx3", _OPAQUE),
+    f2=("rx0", IQ),
+    f3=("rx1", IQ),
+    f4=("rx2", IQ),
+    f5=("rx3", IQ),
     f6=("idx_frame", UINT),
     f7=("idx_frame_loop", UINT),
     f8=("chirp_index", INT32),
-    f9=("chirp_quality", _OPAQUE),
+    f9=("chirp_quality", CHIRP_QUALITY),
+)
+INS_STATUS = _msg(
+    "INSStatus",
+    (1, 2, 3, 4, 5),
+    f1=("mode", UINT),
+    f2=("gps_has_fix", UINT),
+    f3=("error_imu", UINT),
+    f4=("error_magnetometer_or_pressure", UINT),
+    f5=("error_gps", UINT),
+)
+POSE_QUALITY = _msg(
+    "PoseQuality",
+    (),
+    f1=("position_uncertainty", VEC3D),
+    f2=("velocity_uncertainty", DOUBLE),
+    f3=("gps_fix", UINT),
+    f4=("number_of_satellites", INT32),
+    f5=("ins_status", INS_STATUS),
+    f6=("orientation_uncertainty", VEC3D),
 )
 POSE_RECORD = _msg(
     "PoseRecord",
@@ -165,7 +194,7 @@ POSE_RECORD = _msg(
     f5=("orientation", QUATERNION),
     f6=("angular_velocity", VEC3D),
     f7=("angular_acceleration", VEC3D),
-    f8=("pose_quality", _OPAQUE),
+    f8=("pose_quality", POSE_QUALITY),
 )
 
 
@@ -186,6 +215,10 @@ class Kind:
     name_hints : tuple of str
         Substrings of file names users reported for it (used only to break ties between
         kinds that decode a stream equally well).
+    expects : tuple of int
+        Optional fields that hold what the importer converts (``Image.cartesian``): a kind whose
+        sniffed records carry them is preferred over one whose records lack them (a ``Position``
+        decodes as a 2020 ``Image`` without an image).
     """
 
     name: str
@@ -193,6 +226,7 @@ class Kind:
     message: Message
     converted: bool = True
     name_hints: tuple[str, ...] = ()
+    expects: tuple[int, ...] = ()
 
     @property
     def label(self) -> str:
@@ -201,10 +235,10 @@ class Kind:
 
 # Order matters only as the last tie-break: the 2020 release's kinds first.
 KINDS: tuple[Kind, ...] = (
-    Kind("Image", "2020", IMAGE_2020, name_hints=("_images",)),
-    Kind("Image", "2021", IMAGE_2021, name_hints=("_images",)),
+    Kind("Image", "2020", IMAGE_2020, name_hints=("_images",), expects=(10,)),
+    Kind("Image", "2021", IMAGE_2021, name_hints=("_images",), expects=(1, 10)),
     Kind("TrackerState", "2020", TRACKER_STATE_2020, name_hints=("_points",)),
-    Kind("TrackerState", "2021", TRACKER_STATE_2021, name_hints=("_points",)),
+    Kind("TrackerState", "2021", TRACKER_STATE_2021, name_hints=("_points",), expects=(1,)),
     Kind("Position", "2020", POSITION, name_hints=("vn200", "tracklog")),
     Kind("LidarPointsFrame", "2020", LIDAR_FRAME, name_hints=("lidar",)),
     Kind("LidarPointsFrame", "2021-01 draft", LIDAR_FRAME_DRAFT, name_hints=("lidar",)),

@@ -18,6 +18,7 @@ _MAX_FRAMES = 20
 _MAX_DT_S = 0.05
 _DECISIVE_RATIO = 2.0
 _MIN_POINTS = 5
+_REPORT_CAP_DB = 60.0  # beyond this the figure says nothing more (a bright pixel against a zero background)
 
 
 def _brightness(flat: np.ndarray, index: np.ndarray) -> float:
@@ -44,12 +45,13 @@ def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarra
         True: flat element ``j·rows + i``; False: ``i·cols + j``; None: the evidence does not decide
         (too few points in the images, square images with symmetric content, ...).
     evidence : str
-        The brightness ratios measured, for the import summary.
+        The brightness ratio measured (geometric mean over the frames used, in dB, capped at
+        ±60 dB), for the import summary.
     """
     if not probes:
         return None, "no detections or lidar points to check against"
     times = np.array([t for t, _ in probes])
-    log_ratio = 0.0
+    log_ratios = []
     used = 0
     for frame in frames[:_MAX_FRAMES]:
         k = int(np.argmin(np.abs(times - frame.timestamp_s)))
@@ -74,12 +76,15 @@ def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarra
         i, j = i[inside], j[inside]
         score_a = _brightness(flat, j * frame.rows + i)
         score_b = _brightness(flat, i * frame.cols + j)
-        log_ratio += np.log(max(score_a, 1e-12) / max(score_b, 1e-12))
+        log_ratios.append(np.log(max(score_a, 1e-12) / max(score_b, 1e-12)))
         used += int(np.count_nonzero(inside))
     if used < _MIN_POINTS:
         return None, f"only {used} known points fell inside the images"
-    ratio = float(np.exp(log_ratio))
-    text = f"{used} known points are {ratio:.3g}x brighter under the SDK reading than row-major"
+    # Per frame, not their product: 20 frames of 10x are not 1e20x.
+    ratio = float(np.exp(np.mean(log_ratios)))
+    db = 20 * np.log10(ratio)  # a ratio of magnitudes
+    figure = f"{db:+.1f} dB" if abs(db) <= _REPORT_CAP_DB else f"{'>' if db > 0 else '<'} {db / abs(db) * _REPORT_CAP_DB:+.0f} dB"
+    text = f"{used} known points in {len(log_ratios)} frames: {figure} brighter under the SDK reading than row-major (geometric mean per frame)"
     if ratio >= _DECISIVE_RATIO:
         return True, text
     if ratio <= 1 / _DECISIVE_RATIO:

@@ -13,12 +13,24 @@ import numpy as np
 
 from zendar_dataset.release import messages as m
 from zendar_dataset.release.messages import Kind
-from zendar_dataset.release.wire import WireError, decode, decode_repeated_columns, repeated_spans
+from zendar_dataset.release.wire import WireError, count_unknown, decode, decode_repeated_columns, repeated_spans
 
 REAL_32U = 5
 COMPLEX_32F = 1
 REAL_32F = 3  # reserved in the schema, seen as an unknown enum value
 EARTH_RADIUS_MIN_M = 6.3e6  # a position this far from the Earth's centre is ECEF, not a local frame
+
+
+class MissingField(Exception):
+    """A record lacks an optional field (in the SDK's definition) that its conversion needs.
+
+    ``field`` names it (``"Image.cartesian"``); the importer skips such records and counts them.
+    """
+
+    def __init__(self, field: str, why: str) -> None:
+        super().__init__(f"{field} absent ({why})")
+        self.field = field
+        self.why = why
 
 
 def gps_seconds_to_ns(seconds: float) -> int:
@@ -83,8 +95,16 @@ class SarFrame:
 
 
 def sar_frame(kind: Kind, record: dict) -> SarFrame:
-    """A :class:`SarFrame` from a decoded ``Image`` of either generation."""
-    top = record.get("meta", {}) if kind.generation == "2021" else record
+    """A :class:`SarFrame` from a decoded ``Image`` of either generation.
+
+    Raises :class:`MissingField` without ``cartesian`` (a ``oneof`` member, so optional) or, in
+    2021, without ``meta`` (optional; it holds the timestamp).
+    """
+    if "cartesian" not in record:
+        raise MissingField("Image.cartesian", "optional in the SDK (oneof image_model); it holds the image")
+    if kind.generation == "2021" and "meta" not in record:
+        raise MissingField("Image.meta", "optional in the 2021 SDK; it holds the timestamp")
+    top = record["meta"] if kind.generation == "2021" else record
     cartesian = record["cartesian"]
     model, data = cartesian["model"], cartesian["data"]
     return SarFrame(
@@ -101,6 +121,11 @@ def sar_frame(kind: Kind, record: dict) -> SarFrame:
         pixel_type=data.get("type"),
         data=data.get("data", memoryview(b"")),
     )
+
+
+def sar_frame_record(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> SarFrame:
+    """:func:`sar_frame` of one ``Image`` record (``unknown`` as :func:`~zendar_dataset.release.wire.decode`'s)."""
+    return sar_frame(kind, decode(kind.message, buf, start, end, unknown))
 
 
 def sar_flat(frame: SarFrame) -> tuple[np.ndarray, str]:
@@ -160,11 +185,13 @@ def pose(record: dict) -> Pose:
     return Pose(float(record["timestamp"]), _vec(record.get("position")), _quat(record.get("attitude")))
 
 
-def poses(buf: memoryview, offsets: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def poses(
+    buf: memoryview, offsets: np.ndarray, lengths: np.ndarray, unknown: dict[str, int] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every ``Position`` record of a stream, column-wise: ``[K]`` GPS seconds, ``[K, 3]`` ECEF metres,
     ``[K, 4]`` wxyz (NaN where absent); raises :class:`WireError` at the first record that does not decode."""
     n = offsets.shape[0]
-    raw = _columns(m.POSITION, buf, offsets, lengths)
+    raw = _columns(m.POSITION, buf, offsets, lengths, unknown)
     attitude = np.stack([raw.get(f"attitude.{axis}", np.full(n, np.nan)) for axis in "wxyz"], axis=1)
     return raw.get("timestamp", np.full(n, np.nan)), _xyz(raw, "position", n), attitude
 
@@ -199,11 +226,16 @@ _POINT_COLUMNS = {
 }
 
 
-def _check_others(message, others: dict[int, list], repeated: int) -> None:
-    for number, items in others.items():
+def _check_others(message, others: dict[int, list], repeated: int, unknown: dict[str, int] | None) -> None:
+    for number, items in list(others.items()):
         spec = message.fields.get(number)
         if spec is None:
-            raise WireError(f"{message.name}: unknown field {number}", 0)
+            if unknown is None:
+                raise WireError(f"{message.name}: unknown field {number}", 0)
+            for _ in items:
+                count_unknown(unknown, message, number)
+            del others[number]
+            continue
         if number == repeated or any(wire != message.wire_type(number) for wire, _ in items):
             raise WireError(f"{message.name}.{spec.name} (field {number}): unexpected wire type", 0)
     missing = message.required - set(others) - {repeated}
@@ -211,11 +243,13 @@ def _check_others(message, others: dict[int, list], repeated: int) -> None:
         raise WireError(f"{message.name}: missing required field {sorted(missing)}", 0)
 
 
-def _columns(element, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
-    columns, slow = decode_repeated_columns(element, buf, offsets, lengths)
+def _columns(
+    element, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray, unknown: dict[str, int] | None = None
+) -> dict[str, np.ndarray]:
+    columns, slow = decode_repeated_columns(element, buf, offsets, lengths, unknown)
     n = offsets.shape[0]
     for index in slow:
-        decoded = decode(element, buf, int(offsets[index]), int(offsets[index] + lengths[index]))
+        decoded = decode(element, buf, int(offsets[index]), int(offsets[index] + lengths[index]), unknown)
         for name, value in _flatten(decoded):
             columns.setdefault(name, np.full(n, np.nan))[index] = value
     return columns
@@ -233,15 +267,21 @@ def _xyz(columns: dict[str, np.ndarray], name: str, n: int) -> np.ndarray:
     return np.stack([columns.get(f"{name}.{axis}", np.full(n, np.nan)) for axis in "xyz"], axis=1)
 
 
-def detections(kind: Kind, buf: memoryview, start: int, end: int) -> Detections:
-    """A :class:`Detections` from one ``TrackerState`` record of either generation (strictly checked)."""
+def detections(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> Detections:
+    """A :class:`Detections` from one ``TrackerState`` record of either generation (strictly checked;
+    ``unknown`` as :func:`~zendar_dataset.release.wire.decode`'s).
+
+    Raises :class:`MissingField` for a 2021 record without ``meta`` (optional; it holds the timestamp).
+    """
     offsets, lengths, others = repeated_spans(buf, start, end, 2)
-    _check_others(kind.message, others, 2)
+    _check_others(kind.message, others, 2, unknown)
     head_message = m.METADATA if kind.generation == "2021" else m.TIME_RECORD
+    if kind.generation == "2021" and 1 not in others:
+        raise MissingField("TrackerState.meta", "optional in the 2021 SDK; it holds the timestamp")
     head = {}
     if 1 in others:
         offset, length = others[1][-1][1]
-        head = decode(head_message, buf, offset, offset + length)
+        head = decode(head_message, buf, offset, offset + length, unknown)
     if kind.generation == "2021":
         timestamp, frame_id, serial = head.get("timestamp", np.nan), head.get("frame_id"), head.get("serial")
     else:
@@ -252,7 +292,7 @@ def detections(kind: Kind, buf: memoryview, start: int, end: int) -> Detections:
             offset, length = others[4][-1][1]
             serial = bytes(buf[offset : offset + length]).decode("utf-8", errors="replace")
     n = offsets.shape[0]
-    raw = _columns(kind.message.fields[2].type, buf, offsets, lengths)
+    raw = _columns(kind.message.fields[2].type, buf, offsets, lengths, unknown)
     names = _POINT_COLUMNS["2021" if kind.generation == "2021" else "2020"]
     columns = {ours: raw.get(theirs, np.full(n, np.nan)) for ours, theirs in names.items()}
     columns["position_ecef"] = _xyz(raw, "position", n)
@@ -272,15 +312,16 @@ class LidarSweep:
     intensity: np.ndarray
 
 
-def lidar_sweep(kind: Kind, buf: memoryview, start: int, end: int) -> LidarSweep:
-    """A :class:`LidarSweep` from one ``LidarPointsFrame`` of either point layout."""
+def lidar_sweep(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> LidarSweep:
+    """A :class:`LidarSweep` from one ``LidarPointsFrame`` of either point layout (``unknown`` as
+    :func:`~zendar_dataset.release.wire.decode`'s)."""
     offsets, lengths, others = repeated_spans(buf, start, end, 2)
-    _check_others(kind.message, others, 2)
+    _check_others(kind.message, others, 2, unknown)
     offset, _ = others[1][-1][1]
     timestamp = float(np.frombuffer(buf, "<f8", 1, offset)[0])
     element = kind.message.fields[2].type
     n = offsets.shape[0]
-    raw = _columns(element, buf, offsets, lengths)
+    raw = _columns(element, buf, offsets, lengths, unknown)
     intensity = raw.get("intensity", np.full(n, np.nan))
     if kind.generation == "2021-01 draft":
         return LidarSweep(timestamp, _xyz(raw, "position", n), None, intensity)

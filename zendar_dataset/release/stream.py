@@ -173,6 +173,12 @@ def _first_record_parses(data: memoryview, chain: _Chain, kinds: tuple[Kind, ...
 
 
 def _choose_framing(data: memoryview, gzipped: bool, kinds: tuple[Kind, ...]) -> tuple[Framing, _Chain]:
+    """The framing from the length prefixes alone; the records' content only breaks a tie.
+
+    A chain that tiles the file is sound framing whatever its records hold (an unknown message
+    is reported by sniffing, not as corruption). Content is consulted only when both chains tile
+    and bytes 0-7 are not zero, or, for a truncated file, to pick the chain to report.
+    """
     n = len(data)
     plain = _follow(data, 0)
     if n < HEADER_BYTES:
@@ -184,13 +190,14 @@ def _choose_framing(data: memoryview, gzipped: bool, kinds: tuple[Kind, ...]) ->
             return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 0 and from byte 8; bytes 0-7 are zero"), headed
         if _first_record_parses(data, headed, kinds) and not _first_record_parses(data, plain, kinds):
             return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 0 and 8; only byte 8 parses"), headed
-        return Framing(0, gzipped, "lengths tile the file from byte 0 and from byte 8; the first record parses from byte 0"), plain
-    if plain.tiles and _first_record_parses(data, plain, kinds):
+        return Framing(0, gzipped, "lengths tile the file from byte 0 and from byte 8; byte 0 taken"), plain
+    if plain.tiles:
         return Framing(0, gzipped, "lengths tile the file from byte 0"), plain
-    if headed.tiles and _first_record_parses(data, headed, kinds):
+    if headed.tiles:
         return Framing(HEADER_BYTES, gzipped, "lengths tile the file from byte 8"), headed
-    # Neither tiles: truncated or corrupt. Keep the framing that reads further with a parsing first record.
-    candidates = [c for c in (headed, plain) if _first_record_parses(data, c, kinds)] or [headed, plain]
+    # Neither tiles: truncated or corrupt. Keep the framing that reads further with a parsing first record
+    # (a chain that broke before its first record proves nothing).
+    candidates = [c for c in (headed, plain) if any(c.lengths) and _first_record_parses(data, c, kinds)] or [headed, plain]
     if zero_header and headed in candidates:
         best = headed
     else:
@@ -254,6 +261,9 @@ class ReleaseStream:
         What ``skip_corrupt`` skipped.
     empty_records : int
         Records of length 0 (empty messages; not yielded).
+    unknown_fields : dict
+        ``"<Message>.<number>"`` -> occurrences of fields the kind's definition lacks, skipped while
+        decoding (the kind is decided by strict sniffing first).
     notes : list of str
         How the kind was decided, for the import summary.
 
@@ -270,6 +280,7 @@ class ReleaseStream:
         self.losses: list[Loss] = []
         self.notes: list[str] = []
         self.empty_records = 0
+        self.unknown_fields: dict[str, int] = {}
         candidates = kinds_named(kind)
         try:
             data, gzipped, self._mapping = _read_bytes(self.path)
@@ -281,7 +292,13 @@ class ReleaseStream:
         self.size_bytes = len(data)
         self._data = data
         self.framing, chain = _choose_framing(data, gzipped, candidates)
-        self.kind = self._sniff(chain, candidates)
+        try:
+            self.kind = self._sniff(chain, candidates)
+        except UnknownMessageError:
+            if not chain.tiles:
+                # Broken framing is the error to report, whatever the records hold.
+                self.report_problem(chain.end, len(data) - chain.end, f"truncated or corrupt: {chain.problem}")
+            raise
         self._offsets, self._lengths = self._records(chain)
 
     def _where(self, offset: int) -> str:
@@ -322,19 +339,26 @@ class ReleaseStream:
 
     def _sniff(self, chain: _Chain, candidates: tuple[Kind, ...]) -> Kind:
         alive = list(candidates)
+        fields_seen: dict[str, set[int]] = {kind.label: set() for kind in candidates}
         seen = 0
         first_error: tuple[int, str] | None = None
         for offset, length in zip(chain.offsets, chain.lengths):
             if length == 0:
                 continue
             survivors = []
+            errors = []
             for kind in alive:
                 try:
-                    check(kind.message, self._data, offset, offset + length)
+                    fields_seen[kind.label] |= check(kind.message, self._data, offset, offset + length)
                     survivors.append(kind)
                 except WireError as exc:
+                    errors.append(str(exc))
                     if first_error is None:
                         first_error = (offset, str(exc))
+            if not survivors and seen:
+                # The earlier records already narrowed the kinds; this one is read (or reported) with them.
+                self.notes.append(f"the record at byte offset {offset - 4} decodes as none of them strictly ({errors[0]})")
+                break
             if not survivors:
                 tried = ", ".join(k.label for k in alive)
                 detail = f" (first mismatch: {first_error[1]})" if first_error else ""
@@ -348,12 +372,18 @@ class ReleaseStream:
             self.notes.append(f"no non-empty record to sniff; taken as {kind.label}")
             return kind
         if len(alive) > 1:
-            hinted = [k for k in alive if any(h in self.path.name.lower() for h in k.name_hints)]
-            chosen = (hinted or alive)[0]
-            how = "the file name" if len(hinted) == 1 else "the release's preference order (2020 first)"
-            self.notes.append(
-                f"records decode as {', '.join(k.label for k in alive)}; {how} chose {chosen.label}"
-            )
+            # Content first: a kind whose records carry what it is converted from (an Image its image).
+            carrying = [k for k in alive if set(k.expects) <= fields_seen[k.label]]
+            pool = carrying or alive
+            hinted = [k for k in pool if any(h in self.path.name.lower() for h in k.name_hints)]
+            chosen = (hinted or pool)[0]
+            if len(pool) == 1:
+                how = f"only {chosen.label} carries the fields it is converted from"
+            elif len(hinted) == 1:
+                how = f"the file name chose {chosen.label}"
+            else:
+                how = f"the release's preference order (2020 first) chose {chosen.label}"
+            self.notes.append(f"records decode as {', '.join(k.label for k in alive)}; {how}")
             return chosen
         self.notes.append(f"only {alive[0].label} decodes the first {seen} records")
         return alive[0]
@@ -390,7 +420,7 @@ class ReleaseStream:
         """Decoded records (field name -> value) in file order; corrupt ones raise or are skipped."""
         for offset, data, start, end in self.records():
             try:
-                yield decode(self.kind.message, data, start, end)
+                yield decode(self.kind.message, data, start, end, self.unknown_fields)
             except WireError as exc:
                 self.report_problem(offset, end - offset, f"record of {self.kind.label} does not decode: {exc}")
 

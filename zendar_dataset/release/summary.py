@@ -24,6 +24,7 @@ class StreamSummary:
     skipped: list[str] = field(default_factory=list)
     lost_bytes: int = 0
     notes: list[str] = field(default_factory=list)
+    unknown_fields: dict[str, int] = field(default_factory=dict)  # "<Message>.<number>" -> occurrences ignored
 
 
 @dataclass
@@ -33,6 +34,7 @@ class SceneSummary:
     scene_id: str
     source: str
     status: str = "imported"  # or "already imported"
+    fingerprint: str | None = None  # of the source streams' content (release/discover.py)
     streams: list[StreamSummary] = field(default_factory=list)
     assumptions: list[str] = field(default_factory=list)
 
@@ -60,6 +62,9 @@ class ImportSummary:
                     out.append(f"    kind: {note}")
                 if st.empty_records:
                     out.append(f"    {st.empty_records} empty records (length 0) skipped")
+                if st.unknown_fields:
+                    counts = ", ".join(f"{name} x{n}" for name, n in st.unknown_fields.items())
+                    out.append(f"    unknown fields (not in the SDK's definition) ignored: {counts}")
                 if st.lost_bytes:
                     out.append(f"    lost {st.lost_bytes} bytes to --skip-corrupt")
                 for reason in st.skipped:

@@ -129,13 +129,21 @@ def _scalar(kind: str, buf: memoryview, value: Any) -> Any:
     return bytes(buf[start : start + length]).decode("utf-8", errors="replace")
 
 
-def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = None) -> dict[str, Any]:
+def decode(
+    message: Message, buf: memoryview, start: int = 0, end: int | None = None, unknown: dict[str, int] | None = None
+) -> dict[str, Any]:
     """Decode ``buf[start:end]`` as ``message``, strictly.
 
     Strict means: an unknown field number, a wire type that differs from the
     definition or a missing required field raises :class:`WireError`.  This is
     what tells the schema generations apart, which parse into each other
     silently under a lenient decoder.  Repeated scalars are accepted packed or not.
+
+    Parameters
+    ----------
+    unknown
+        None: an unknown field number raises.  A dict (once the message kind is decided):
+        unknown fields are skipped and counted in it, keyed ``"<Message>.<number>"``.
 
     Returns
     -------
@@ -149,7 +157,10 @@ def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = 
     for number, wire, value in iter_fields(buf, start, end):
         spec = message.fields.get(number)
         if spec is None:
-            raise WireError(f"{message.name}: unknown field {number} (wire type {wire})", start)
+            if unknown is None:
+                raise WireError(f"{message.name}: unknown field {number} (wire type {wire})", start)
+            count_unknown(unknown, message, number)
+            continue
         expected = message.wire_type(number)
         kind = spec.type
         if wire != expected:
@@ -164,7 +175,7 @@ def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = 
             )
         if isinstance(kind, Message):
             offset, length = value
-            item: Any = decode(kind, buf, offset, offset + length)
+            item: Any = decode(kind, buf, offset, offset + length, unknown)
         else:
             item = _scalar(kind, buf, value)
         if spec.repeated:
@@ -180,6 +191,12 @@ def decode(message: Message, buf: memoryview, start: int = 0, end: int | None = 
         names = ", ".join(f"{message.fields[n].name} ({n})" for n in sorted(missing))
         raise WireError(f"{message.name}: missing required field {names}", start)
     return out
+
+
+def count_unknown(unknown: dict[str, int], message: Message, number: int) -> None:
+    """Count one occurrence of field ``number``, which ``message`` does not define."""
+    key = f"{message.name}.{number}"
+    unknown[key] = unknown.get(key, 0) + 1
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -250,13 +267,13 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
     return numbers[:n], wires[:n], values[:n], lengths[:n], -1
 
 
-def check(message: Message, buf: memoryview, start: int = 0, end: int | None = None, sample: int = 8) -> None:
+def check(message: Message, buf: memoryview, start: int = 0, end: int | None = None, sample: int = 8) -> frozenset[int]:
     """Raise :class:`WireError` unless ``buf[start:end]`` is a strict encoding of ``message``.
 
     The same rules as :func:`decode` (no unknown field, matching wire types, singular fields
     once, required fields present), checked on every top-level field but only on the first
     ``sample`` elements of each repeated sub-message, so sniffing a 30 000-point lidar sweep
-    costs microseconds rather than a full decode.
+    costs microseconds rather than a full decode.  Returns the top-level field numbers present.
     """
     end = len(buf) if end is None else end
     numbers, wires, values, lengths, error_at = _scan(np.frombuffer(buf, np.uint8), start, end)
@@ -285,6 +302,7 @@ def check(message: Message, buf: memoryview, start: int = 0, end: int | None = N
     if missing:
         names = ", ".join(f"{message.fields[n].name} ({n})" for n in sorted(missing))
         raise WireError(f"{message.name}: missing required field {names}", start)
+    return frozenset(present.tolist())
 
 
 def repeated_spans(buf: memoryview, start: int, end: int, number: int) -> tuple[np.ndarray, np.ndarray, dict[int, list]]:
@@ -430,7 +448,7 @@ def _record_values(records: np.ndarray, column: Column) -> tuple[np.ndarray, np.
 
 
 def decode_repeated_columns(
-    element: Message, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray
+    element: Message, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray, unknown: dict[str, int] | None = None
 ) -> tuple[dict[str, np.ndarray], list[int]]:
     """Decode many encodings of one message column-wise into numpy arrays.
 
@@ -440,6 +458,8 @@ def decode_repeated_columns(
     Elements whose encoding has the same length and tag skeleton as the first
     all-fixed-width element are read as strided views (no per-element Python
     work); the rest are returned by index for the generic decoder.
+
+    ``unknown`` is :func:`decode`'s (elements with unknown fields take the generic path).
 
     Returns
     -------
@@ -463,7 +483,7 @@ def decode_repeated_columns(
         layout = _layout(element, buf, int(offsets[first]), int(offsets[first] + lengths[first]))
         if layout is None:
             break
-        decode(element, buf, int(offsets[first]), int(offsets[first] + lengths[first]))  # strict check once
+        decode(element, buf, int(offsets[first]), int(offsets[first] + lengths[first]), unknown)  # strict check once
         tags, cols = layout
         size = int(lengths[first])
         same_length = remaining[lengths[remaining] == size]
