@@ -3,6 +3,7 @@
 Installed as ``zendar_leaderboard`` (the repository folder is ``leaderboard/``). Modules:
 
 - ``ground_truth`` — the hidden test split, its checksum and its public / private parts;
+- ``names`` — what a shown name or text may contain, the normal form of names, look-alike team names;
 - ``meta`` and ``submission`` — the submission rules (the evaluator's validator plus ``meta``);
 - ``scoring`` — per-part scores through ``zendar_dataset.eval.evaluate``, rounded for display;
 - ``store`` — SQLite (WAL) records of teams, submissions and scores;

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sqlite3
 import sys
@@ -59,29 +60,42 @@ def _problems(name: str, problems: list[str]) -> ZendarError:
 
 
 def _serve(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.store import lock_for_serving
+
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
+    db = Path(args.db)
+    if not db.parent.is_dir():
+        raise ZendarError(f"the folder of --db {args.db!r} does not exist")
+    # Before anything else: a second server on the database would put the first one's submission in
+    # progress back in the queue (exit 2 here, nothing touched).
+    with lock_for_serving(db):
+        return _serve_locked(args, db)
+
+
+def _serve_locked(args: argparse.Namespace, db: Path) -> int:
     from zendar_dataset.eval.protocol import PROTOCOL_VERSION
     from zendar_leaderboard.ground_truth import load_test_split
     from zendar_leaderboard.scheduler import ScorerSettings, ScoringService
     from zendar_leaderboard.server import LeaderboardHTTPServer, ServerSettings
     from zendar_leaderboard.store import Store
 
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(message)s")
     test_split = load_test_split(args.gt, args.split)
-    db = Path(args.db)
-    if not db.parent.is_dir():
-        raise ZendarError(f"the folder of --db {args.db!r} does not exist")
     store = Store(db)
-    recovered = store.recover(PROTOCOL_VERSION, test_split.sha256)
     scoring = ScoringService(store, ScorerSettings(
         gt=str(Path(args.gt).resolve()), split=test_split.split, db=str(db.resolve()), gt_sha256=test_split.sha256,
         time_limit_s=args.time_limit_s, memory_mb=args.memory_mb, bootstrap=args.bootstrap, workers=args.workers,
     ))
-    settings = ServerSettings(store, test_split, scoring, quota=args.quota, max_bytes=args.max_bytes)
+    settings = ServerSettings(
+        store, test_split, scoring, quota=args.quota, max_bytes=args.max_bytes, upload_deadline_s=args.upload_deadline_s,
+        max_connections=args.max_connections, max_connections_per_address=args.max_connections_per_address,
+    )
     try:
         server = LeaderboardHTTPServer((args.host, args.port), settings)
     except OSError as exc:
         print(f"error: cannot listen on {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_ENVIRONMENT
+    # Only a server that got its port takes over the queue.
+    recovered = store.recover(PROTOCOL_VERSION, test_split.sha256)
     scoring.start()
     host, port = server.server_address[:2]
     print(
@@ -102,21 +116,48 @@ def _serve(args: argparse.Namespace) -> int:
 
 
 def _add_team(args: argparse.Namespace) -> int:
+    from zendar_leaderboard.names import normalised
     from zendar_leaderboard.store import Store
 
     if not Path(args.db).parent.is_dir():
         raise ZendarError(f"the folder of --db {args.db!r} does not exist")
     token = Store(args.db).add_team(args.name)
     print(token)
-    print(f"team {args.name!r} registered; its token is shown only this once", file=sys.stderr)
+    print(f"team {normalised(args.name)!r} registered; its token is shown only this once", file=sys.stderr)
     return 0
+
+
+#: The environment variable ``submit`` reads the team's token from.
+TOKEN_VARIABLE = "ZENDAR_LEADERBOARD_TOKEN"
+
+
+def _submit_token(args: argparse.Namespace) -> str:
+    """The team's token: from --token-file, --token (with a warning) or the environment."""
+    if args.token_file is not None:
+        path = Path(args.token_file)
+        try:
+            token = path.read_text(encoding="utf-8").strip()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ZendarError(f"cannot read the token file {args.token_file!r}: {getattr(exc, 'strerror', None) or exc}") from None
+        if not token:
+            raise ZendarError(f"the token file {args.token_file!r} is empty")
+        return token
+    if args.token is not None:
+        print(f"warning: --token is visible to every user of this machine (ps); "
+              f"prefer --token-file PATH or {TOKEN_VARIABLE}", file=sys.stderr)
+        return args.token
+    token = os.environ.get(TOKEN_VARIABLE, "").strip()
+    if not token:
+        raise ZendarError(f"no token: give --token-file PATH (a file holding the team's token) or set {TOKEN_VARIABLE}")
+    return token
 
 
 def _submit(args: argparse.Namespace) -> int:
     from zendar_leaderboard.client import ServerUnreachable, submit
 
+    token = _submit_token(args)
     try:
-        return submit(args.file, args.server, args.token, wait=not args.no_wait, timeout_s=args.timeout_s)
+        return submit(args.file, args.server, token, wait=not args.no_wait, timeout_s=args.timeout_s)
     except ServerUnreachable as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ENVIRONMENT
@@ -179,6 +220,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quota", type=whole_number("--quota", 1), default=3,
                    help="scored submissions per team per rolling 30 days (default 3)")
     p.add_argument("--max-bytes", type=max_bytes, default=DEFAULT_MAX_BYTES, help=f"largest upload (default {DEFAULT_MAX_BYTES:,})")
+    p.add_argument("--upload-deadline-s", type=positive_number("--upload-deadline-s"), default=None,
+                   help="time to send a whole upload (default: 10 s + --max-bytes at 250 kB/s)")
+    p.add_argument("--max-connections", type=whole_number("--max-connections", 1), default=512,
+                   help="open connections in all (default 512)")
+    p.add_argument("--max-connections-per-address", type=whole_number("--max-connections-per-address", 1), default=64,
+                   help="open connections per client address (default 64)")
     p.add_argument("--time-limit-s", type=positive_number("--time-limit-s"), default=600.0,
                    help="scoring time per submission (default 600)")
     p.add_argument("--memory-mb", type=whole_number("--memory-mb", 1), default=4096,
@@ -197,7 +244,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("submit", help="upload a submission, wait for its score and print it")
     p.add_argument("file", metavar="FILE")
     p.add_argument("--server", required=True, help="the leaderboard's URL, e.g. http://127.0.0.1:8000")
-    p.add_argument("--token", required=True, help="the team's token")
+    tokens = p.add_mutually_exclusive_group()
+    tokens.add_argument("--token-file", default=None, metavar="PATH", help="a file holding the team's token")
+    tokens.add_argument("--token", default=None,
+                        help=f"the team's token (visible to other users of this machine; prefer --token-file or {TOKEN_VARIABLE})")
     p.add_argument("--no-wait", action="store_true", help="return once queued")
     p.add_argument("--timeout-s", type=float, default=3600.0, help="give up waiting after this long (default 3600)")
     p.set_defaults(func=_submit)

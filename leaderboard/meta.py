@@ -1,7 +1,10 @@
 """The rules of a submission's ``meta`` object: who made it, how, with which data.
 
 Every problem is collected, never only the first. The checked meta keeps only the known keys, so
-nothing else a submitter writes is ever shown.
+nothing else a submitter writes is ever shown. Every text follows the character rules of
+:mod:`zendar_leaderboard.names` (no control, invisible formatting or private-use characters, no
+stacks of combining marks); the one-line names a page shows (``method``, ``team``, ``hardware``)
+are kept normalised, and their length limits count the normalised text.
 """
 
 from __future__ import annotations
@@ -9,6 +12,8 @@ from __future__ import annotations
 import math
 import re
 from typing import Any
+
+from zendar_leaderboard.names import character_problem, normalised
 
 MAX_METHOD_CHARS = 40
 
@@ -36,8 +41,11 @@ MAX_RUNTIME_MS = 86_400_000.0
 
 META_KEYS = tuple(name for name, _, _ in TEXT_FIELDS) + BOOLEAN_FIELDS + ("runtime_ms",)
 
-# Control characters other than tab and newline have no place in a name or a description.
-_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f]")
+#: One-line names shown on the pages: stored normalised (NFKC, single spaces, stripped).
+NORMALISED_FIELDS = ("method", "team", "hardware")
+
+#: The one text that may hold line breaks and tabs.
+MULTILINE_FIELDS = ("description",)
 
 
 def _type_name(value: Any) -> str:
@@ -69,12 +77,15 @@ def meta_problems(meta: Any) -> list[str]:
         if not isinstance(value, str):
             problems.append(f"meta: {name!r} must be a string, got {_type_name(value)}")
             continue
-        if len(value) > max_chars:
-            problems.append(f"meta: {name!r} has {len(value)} characters, more than the limit of {max_chars}")
+        # Normalising can lengthen a text (one compatibility character may stand for many).
+        shown = normalised(value) if name in NORMALISED_FIELDS else value
+        if len(shown) > max_chars:
+            problems.append(f"meta: {name!r} has {len(shown)} characters, more than the limit of {max_chars}")
         if name in ("method", "team", "contact", "hardware") and not value.strip():
             problems.append(f"meta: {name!r} is empty")
-        if _CONTROL.search(value) or (name != "description" and "\n" in value):
-            problems.append(f"meta: {name!r} contains control characters")
+        character = character_problem(value, multiline=name in MULTILINE_FIELDS)
+        if character is not None:
+            problems.append(f"meta: {name!r} {character}")
         if name == "url" and not re.match(r"https?://[^\s]+$", value):
             problems.append(f"meta: 'url' must start with http:// or https:// and contain no spaces, got {value[:60]!r}")
     for name in BOOLEAN_FIELDS:
@@ -94,5 +105,10 @@ def meta_problems(meta: Any) -> list[str]:
 
 
 def clean_meta(meta: dict) -> dict:
-    """The known keys of a valid ``meta``, in a fixed order (``url`` only when given)."""
-    return {name: meta[name] for name in META_KEYS if name in meta}
+    """The known keys of a valid ``meta``, in a fixed order (``url`` only when given), with the
+    names of :data:`NORMALISED_FIELDS` normalised."""
+    return {
+        name: normalised(meta[name]) if name in NORMALISED_FIELDS else meta[name]
+        for name in META_KEYS
+        if name in meta
+    }

@@ -22,6 +22,11 @@ from zendar_leaderboard.scoring import BANDS
 from zendar_leaderboard.store import ScoreRow, Store, SubmissionRow
 
 
+#: Meta keys never shown: the contact address, and the submitter's own ``team`` (``team`` of an
+#: entry is the registered name).
+PRIVATE_META_KEYS = ("contact", "team")
+
+
 def iso_utc(unix_s: float) -> str:
     """UNIX seconds as ISO 8601 UTC to the second, e.g. ``2026-12-01T16:55:34Z``."""
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(unix_s))
@@ -56,7 +61,9 @@ def entry_dict(submission: SubmissionRow, score: ScoreRow, closed: bool) -> dict
     if closed and score.public:
         entry["ap_public"] = score.public["ap"]
     # The contact address stays with the organisers: a public page would hand it to harvesters.
-    entry["meta"] = {key: value for key, value in submission.meta.items() if key != "contact"}
+    # meta.team is only what the submitter typed: the entry's team is the registered one, and a
+    # second, unchecked team name next to it could claim to be another team.
+    entry["meta"] = {key: value for key, value in submission.meta.items() if key not in PRIVATE_META_KEYS}
     entry["submitted_at"] = iso_utc(submission.submitted_at)
     entry["part"] = part_name
     entry["protocol_version"] = score.protocol_version

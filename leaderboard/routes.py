@@ -8,10 +8,13 @@ A view takes the request (the server's handler: headers, body, ``band``, and ``s
 settings and ranking cache) and the path pattern's groups, and returns an :class:`Answer`.
 
 An upload is refused before its body is read when the token is missing or wrong (401), the declared
-``Content-Length`` is missing (411) or over the limit (413), the round is closed (403) or the team's
-quota is used (429). Otherwise the body is read and checked whole (422 with every problem), then
-recorded and queued (202). Nothing in a request is ever used as a file name: the server reads only
-the labels and database it was started with.
+``Content-Length`` is missing (411) or over the limit (413), the round is closed (403), the team's
+quota is used or it has an upload in progress already (429), or no receiving slot frees within
+UPLOAD_SLOT_WAIT_S (503). Otherwise it takes a receiving slot, its body is read within the upload
+deadline (408 when it is slower), then it takes a checking slot and is checked whole (422 with the
+first problems and how many more), recorded and queued (202). Slow bodies hold receiving slots,
+never checking slots. Nothing in a request is ever used as a file name: the server reads
+only the labels and database it was started with.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ import orjson
 from zendar_leaderboard import ranking
 from zendar_leaderboard.pages import entry_page, submit_page
 from zendar_leaderboard.scoring import BANDS
-from zendar_leaderboard.store import QuotaExceeded, RoundClosed, Team
+from zendar_leaderboard.store import QuotaExceeded, RoundClosed, StoreUnavailable, Team
 from zendar_leaderboard.submission import check_submission
 
 if TYPE_CHECKING:
@@ -37,9 +40,11 @@ if TYPE_CHECKING:
 UPLOAD_PATH = "/api/submissions"
 # ASCII digits only: str.isdigit() also accepts '²', which int() then refuses.
 _CONTENT_LENGTH = re.compile(r"[0-9]{1,15}")
-#: How long an upload waits for a checking slot before the server answers 503.
+#: How long an upload whose headers passed waits for a receiving or a checking slot before the
+#: server answers 503.
 UPLOAD_SLOT_WAIT_S = 30.0
-#: At most this many problems are listed in a 422 answer, each at most PROBLEM_CHARS long.
+#: At most this many problems are listed in a 422 answer, each at most PROBLEM_CHARS long; the
+#: rest are counted, never built.
 MAX_PROBLEMS = 1000
 PROBLEM_CHARS = 300
 
@@ -123,10 +128,11 @@ def admit_upload(request: Handler) -> tuple[Team, int] | Answer:
     return team, length
 
 
-def _shape_problems(problems: list[str]) -> list[str]:
+def _shape_problems(problems: list[str], not_listed: int) -> list[str]:
     shown = [p if len(p) <= PROBLEM_CHARS else p[: PROBLEM_CHARS - 3] + "..." for p in problems[:MAX_PROBLEMS]]
-    if len(problems) > MAX_PROBLEMS:
-        shown.append(f"... and {len(problems) - MAX_PROBLEMS} more problems")
+    not_listed += max(0, len(problems) - MAX_PROBLEMS)
+    if not_listed:
+        shown.append(f"... and {not_listed:,} more problem{'s' if not_listed != 1 else ''}")
     return shown
 
 
@@ -140,25 +146,54 @@ def upload(request: Handler) -> Answer:
         return admitted
     team, length = admitted
     settings = request.server.settings
-    # A slot is taken before the body is read: uploads held in memory at once are bounded by the
-    # slots, not by how many connections a client opens.
-    if not settings.check_slots.acquire(timeout=UPLOAD_SLOT_WAIT_S):
-        return error_answer(HTTPStatus.SERVICE_UNAVAILABLE, "the server is busy checking other uploads; try again shortly")
+    if not settings.begin_team_upload(team.id):
+        return error_answer(
+            HTTPStatus.TOO_MANY_REQUESTS,
+            f"team {team.name!r} has {settings.uploads_per_team} upload(s) in progress already; "
+            "send the next one once it is answered",
+        )
     try:
-        body = request.rfile.read(length)
+        return _receive(request, team, length)
+    finally:
+        settings.end_team_upload(team.id)
+
+
+def _receive(request: Handler, team: Team, length: int) -> Answer:
+    """Read, check, record and queue an upload whose headers passed."""
+    settings = request.server.settings
+    busy = error_answer(HTTPStatus.SERVICE_UNAVAILABLE, "the server is busy with other uploads; try again shortly")
+    # Slots are taken once the headers pass: bodies in memory at once are bounded by the receiving
+    # slots, parsed uploads by the checking slots, and the deadline bounds how long a slow body
+    # holds its receiving slot. A slow body never holds a checking slot.
+    if not settings.receive_slots.acquire(timeout=UPLOAD_SLOT_WAIT_S):
+        return busy
+    try:
+        request.send_continue()
+        try:
+            body = request.read_body(length, settings.upload_deadline_s)
+        except TimeoutError:
+            return error_answer(
+                HTTPStatus.REQUEST_TIMEOUT,
+                f"the upload's {length:,} bytes did not arrive within the limit of {settings.upload_deadline_s:g} s; "
+                "nothing was recorded",
+            )
         if len(body) != length:
             return error_answer(HTTPStatus.BAD_REQUEST, f"the body ended after {len(body):,} of {length:,} bytes")
-        checked = check_submission(body, settings.gt_frame_ids)
-        if checked.ok:
+        if not settings.check_slots.acquire(timeout=UPLOAD_SLOT_WAIT_S):
+            return busy
+        try:
+            checked = check_submission(body, settings.gt_frame_ids, max_problems=MAX_PROBLEMS)
             checked.document = None  # only the bytes are kept
+        finally:
+            settings.check_slots.release()
     finally:
-        settings.check_slots.release()
+        settings.receive_slots.release()
     if not checked.ok:
-        n = len(checked.problems)
+        n = checked.problem_count
         return error_answer(
             HTTPStatus.UNPROCESSABLE_ENTITY,
-            f"{n} problem{'s' if n != 1 else ''} in the submission; nothing was queued",
-            problems=_shape_problems(checked.problems),
+            f"{n:,} problem{'s' if n != 1 else ''} in the submission; nothing was queued",
+            problems=_shape_problems(checked.problems, checked.problems_not_listed),
         )
     try:
         submission_id = settings.store.add_submission(team, body, checked.sha256, checked.meta, settings.quota)
@@ -166,6 +201,8 @@ def upload(request: Handler) -> Answer:
         return _quota_used(request, team)
     except RoundClosed as exc:
         return error_answer(HTTPStatus.FORBIDDEN, str(exc))
+    except StoreUnavailable as exc:  # a held lock or a full disk: nothing recorded, the quota untouched
+        return error_answer(HTTPStatus.SERVICE_UNAVAILABLE, f"{exc}; nothing was recorded, try again later")
     if settings.scoring is not None:
         settings.scoring.wake()
     return json_answer(HTTPStatus.ACCEPTED, {"id": submission_id, "status": "queued"})

@@ -5,6 +5,11 @@ time. The watchdog is the slot's deadline: a submission not answered within ``ti
 scorer killed and is marked failed, and the slot starts a fresh scorer; a scorer that dies marks its
 submission failed the same way. So every claimed submission reaches ``scored`` or ``failed`` within
 ``time_limit_s`` (plus a scorer start), and the queue drains at that pace at worst.
+
+The database may refuse a write for a while (another connection holding the write lock past the
+busy timeout, a full disk). A slot never ends on that: it logs the error and tries again with
+doubling waits; a submission whose result cannot be recorded after ``STORE_ATTEMPTS`` is marked
+failed as the server's fault, and does not count against its team's quota.
 """
 
 from __future__ import annotations
@@ -12,21 +17,35 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import sqlite3
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import orjson
 
-from zendar_leaderboard.store import Store
+from zendar_leaderboard.store import INFRASTRUCTURE_FAILURE, NOT_CHARGED, Store
 
 log = logging.getLogger("zendar_leaderboard")
 
 #: Seconds a fresh scorer may take to load the labels and compile the evaluator.
 STARTUP_LIMIT_S = 300.0
+#: Attempts at recording a submission's result (or at the scorer's reading of it) before giving up.
+STORE_ATTEMPTS = 5
+#: The wait after a first failed database step; each further failure doubles it, up to the maximum.
+STORE_RETRY_WAIT_S = 1.0
+STORE_RETRY_MAX_WAIT_S = 60.0
+#: Why a submission failed when the score computed was not of its bytes (its row was changed meanwhile).
+OTHER_BYTES_FAILURE = f"the bytes scored were not this submission's; {NOT_CHARGED}"
+
+
+def retry_wait_s(failures: int) -> float:
+    """The wait after ``failures`` consecutive failed database steps (1, 2, 4, ... times the first)."""
+    return min(STORE_RETRY_WAIT_S * 2 ** (failures - 1), STORE_RETRY_MAX_WAIT_S)
 
 
 @dataclass(frozen=True)
@@ -173,50 +192,131 @@ class ScoringService:
     def _drop(self, scorer: _Scorer) -> None:
         scorer.kill()
         with self._lock:
-            self._scorers.remove(scorer)
+            if scorer in self._scorers:  # an unexpected error may follow a drop
+                self._scorers.remove(scorer)
 
     def _slot(self) -> None:
         scorer: _Scorer | None = None
+        failures = 0
         while not self._stopping.is_set():
-            if scorer is None:
-                scorer = self._new_scorer()
+            try:
                 if scorer is None:
-                    self._stopping.wait(5.0)
-                    continue
-            submission_id = self.store.claim_next()
-            if submission_id is None:
-                self._wake.wait(1.0)
-                self._wake.clear()
-                continue
-            started = time.monotonic()
+                    scorer = self._new_scorer()
+                    if scorer is None:
+                        self._stopping.wait(5.0)
+                        continue
+                scorer = self._step(scorer)
+                failures = 0
+            except Exception as exc:  # the slot outlives any error: it logs it and keeps going
+                if scorer is not None and scorer.process.poll() is not None:
+                    self._drop(scorer)
+                    scorer = None  # else the slot keeps its scorer (a failed claim leaves it idle)
+                failures += 1
+                wait_s = retry_wait_s(failures)
+                if isinstance(exc, sqlite3.Error):
+                    log.error("scoring: the queue cannot be read or claimed (%s); trying again in %g s", exc, wait_s)
+                else:
+                    log.exception("scoring: unexpected error; trying again in %g s", wait_s)
+                self._stopping.wait(wait_s)
+        if scorer is not None:
+            self._drop(scorer)
+
+    def _step(self, scorer: _Scorer) -> _Scorer | None:
+        """Claim and score one submission (or wait for one); returns the scorer unless it was dropped."""
+        submission_id = self.store.claim_next()
+        if submission_id is None:
+            self._wake.wait(1.0)
+            self._wake.clear()
+            return scorer
+        try:
+            return self._score(scorer, submission_id)
+        except Exception:
+            log.exception("submission %d: unexpected error while scoring", submission_id)
+            self._drop(scorer)
+            self._settle(submission_id, None)
+            return None
+
+    def _score(self, scorer: _Scorer, submission_id: int) -> _Scorer | None:
+        """Score a claimed submission and record the outcome; returns the scorer unless it was dropped."""
+        started = time.monotonic()
+        for attempt in range(1, STORE_ATTEMPTS + 1):
             try:
                 scorer.ask(submission_id)
                 answer = scorer.answer(self.settings.time_limit_s)
             except TimeoutError:
                 self._drop(scorer)
-                scorer = None
-                self.store.record_failure(
-                    submission_id, f"scoring took longer than the limit of {self.settings.time_limit_s:g} s"
-                )
                 log.warning("submission %d: time limit, scorer killed", submission_id)
-                continue
+                self._settle(submission_id, lambda: self.store.record_failure(
+                    submission_id, f"scoring took longer than the limit of {self.settings.time_limit_s:g} s"
+                ))
+                return None
             except (ScorerFailed, OSError) as exc:
                 self._drop(scorer)
-                scorer = None
                 if self._stopping.is_set():
-                    self.store.release(submission_id)
+                    self._release(submission_id)
                 else:
                     log.warning("submission %d: %s", submission_id, exc)
-                    self.store.record_failure(
+                    self._settle(submission_id, lambda: self.store.record_failure(
                         submission_id,
                         f"the scorer stopped while scoring this submission (memory limit {self.settings.memory_mb} MB)",
-                    )
-                continue
-            if answer.get("ok"):
-                self.store.record_score(submission_id, answer["sha256"], answer["scores"])
-                log.info("submission %d scored in %.1f s", submission_id, time.monotonic() - started)
-            else:
-                self.store.record_failure(submission_id, answer["error"])
-                log.info("submission %d failed: %s", submission_id, answer["error"])
-        if scorer is not None:
-            self._drop(scorer)
+                    ))
+                return None
+            if not answer.get("store_error"):
+                break
+            log.warning("submission %d: the scorer could not read it (%d of %d)", submission_id, attempt,
+                        STORE_ATTEMPTS)
+            if attempt == STORE_ATTEMPTS:
+                self._settle(submission_id, None)
+                return scorer
+            if self._stopping.wait(retry_wait_s(attempt)):
+                self._release(submission_id)
+                return scorer
+        if answer.get("ok"):
+            self._settle(submission_id, lambda: self._record_score(submission_id, answer))
+            log.info("submission %d scored in %.1f s", submission_id, time.monotonic() - started)
+        else:
+            self._settle(submission_id, lambda: self.store.record_failure(submission_id, answer["error"]))
+            log.info("submission %d failed: %s", submission_id, answer["error"])
+        return scorer
+
+    def _record_score(self, submission_id: int, answer: dict) -> None:
+        if not self.store.record_score(submission_id, answer["sha256"], answer["scores"]):
+            # Deleted meanwhile (then this changes nothing), or holding other bytes than those scored.
+            log.warning("submission %d: score not recorded (deleted, or other bytes)", submission_id)
+            self.store.record_failure(submission_id, OTHER_BYTES_FAILURE, counts_for_quota=False)
+
+    def _release(self, submission_id: int) -> None:
+        """Put a submission back in the queue as the server stops (one try: else the next start does)."""
+        self._retried(lambda: self.store.release(submission_id), f"submission {submission_id}", 1)
+
+    def _settle(self, submission_id: int, write: Callable[[], object] | None) -> None:
+        """End a claimed submission's scoring with ``write``, retried with doubling waits.
+
+        When ``write`` keeps failing (or is None: the failure is already known to be the server's),
+        the submission is marked failed without counting against its team's quota, retried until
+        that is recorded; a server stopping meanwhile leaves it in ``scoring``, and the next start
+        queues it again.
+        """
+        what = f"submission {submission_id}"
+        if write is not None and self._retried(write, what, STORE_ATTEMPTS) or self._stopping.is_set():
+            return
+        self._retried(
+            lambda: self.store.record_failure(submission_id, INFRASTRUCTURE_FAILURE, counts_for_quota=False), what, None
+        )
+
+    def _retried(self, write: Callable[[], object], what: str, attempts: int | None) -> bool:
+        """Run ``write`` until it succeeds (True), ``attempts`` fail (None: no limit) or the server stops."""
+        failures = 0
+        while True:
+            try:
+                write()
+                return True
+            except sqlite3.Error as exc:
+                failures += 1
+                if attempts is not None and failures >= attempts:
+                    log.error("%s: the database refused the result %d times (%s); giving up", what, failures, exc)
+                    return False
+                wait_s = retry_wait_s(failures)
+                log.error("%s: the database refused the result (%s); trying again in %g s", what, exc, wait_s)
+                if self._stopping.wait(wait_s):
+                    return False

@@ -3,35 +3,51 @@
 A submission row and its bytes are written in one transaction, and a score together with the
 status ``scored`` in another, so each is recorded whole or not at all. Tokens are kept only as
 SHA-256 hashes (a token is 256 random bits: a plain hash cannot be searched backwards).
+
+Submission ids are never reused (``AUTOINCREMENT``), and a score is recorded only against the id
+*and* the SHA-256 of the bytes it was computed from. The database and its WAL and shared-memory
+files are readable by their owner only: they hold every team's predictions and contacts. A write
+that fails for a reason of the machine's (the write lock held past the busy timeout, a full disk)
+raises :class:`StoreUnavailable`. One server per database: :func:`lock_for_serving`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
+import logging
+import os
 import secrets
 import sqlite3
+import stat
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from zendar_dataset.errors import ZendarError
+from zendar_leaderboard.names import team_name
+
+log = logging.getLogger("zendar_leaderboard")
 
 ROLLING_WINDOW_S = 30 * 86_400
 #: A submission whose scoring was cut short by a server stop this many times is marked failed.
 MAX_INTERRUPTIONS = 3
+#: Seconds a write waits for another connection's write lock before it fails as unavailable.
+BUSY_TIMEOUT_S = 30.0
+#: Owner read and write only: the files hold every team's predictions, contacts and private scores.
+FILE_MODE = 0o600
+#: What a team reads when its submission failed for a reason of the server's, not of its file.
+NOT_CHARGED = "this submission does not count against the team's quota: submit it again"
+INFRASTRUCTURE_FAILURE = f"scoring failed on the server's side (its database could not be used); {NOT_CHARGED}"
 
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS teams (
-    id INTEGER PRIMARY KEY,
-    name TEXT NOT NULL UNIQUE,
-    token_sha256 TEXT NOT NULL UNIQUE,
-    created_at REAL NOT NULL
-);
-CREATE TABLE IF NOT EXISTS submissions (
-    id INTEGER PRIMARY KEY,
+_SUBMISSIONS_TABLE = """
+CREATE TABLE IF NOT EXISTS {name} (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
     team_id INTEGER NOT NULL REFERENCES teams(id) ON DELETE CASCADE,
     submitted_at REAL NOT NULL,
     status TEXT NOT NULL CHECK (status IN ('queued', 'scoring', 'scored', 'failed')),
@@ -42,10 +58,26 @@ CREATE TABLE IF NOT EXISTS submissions (
     scoring_runs INTEGER NOT NULL DEFAULT 0,
     interruptions INTEGER NOT NULL DEFAULT 0,
     started_at REAL,
-    finished_at REAL
+    finished_at REAL,
+    counts_for_quota INTEGER NOT NULL DEFAULT 1
 );
+"""
+_SUBMISSIONS_COLUMNS = (
+    "id", "team_id", "submitted_at", "status", "sha256", "meta", "error", "hidden", "scoring_runs",
+    "interruptions", "started_at", "finished_at", "counts_for_quota",
+)
+_INDEXES = """
 CREATE INDEX IF NOT EXISTS submissions_status ON submissions(status, id);
 CREATE INDEX IF NOT EXISTS submissions_team ON submissions(team_id, submitted_at);
+"""
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS teams (
+    id INTEGER PRIMARY KEY,
+    name TEXT NOT NULL UNIQUE,
+    token_sha256 TEXT NOT NULL UNIQUE,
+    created_at REAL NOT NULL
+);
+""" + _SUBMISSIONS_TABLE.format(name="submissions") + _INDEXES + """
 CREATE TABLE IF NOT EXISTS bodies (
     submission_id INTEGER PRIMARY KEY REFERENCES submissions(id) ON DELETE CASCADE,
     body BLOB NOT NULL
@@ -64,6 +96,12 @@ CREATE TABLE IF NOT EXISTS scores (
 CREATE TABLE IF NOT EXISTS settings (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 INSERT OR IGNORE INTO settings (key, value) VALUES ('generation', '0');
 """
+
+
+_COUNTED_IN_WINDOW = (
+    "SELECT COUNT(*) FROM submissions WHERE team_id = ? AND submitted_at > ? AND counts_for_quota = 1"
+)
+_OLDEST_QUEUED = "SELECT id FROM submissions WHERE status = 'queued' ORDER BY id LIMIT 1"
 
 
 def token_hash(token: str) -> str:
@@ -91,6 +129,7 @@ class SubmissionRow:
     error: str | None
     hidden: bool
     scoring_runs: int
+    counts_for_quota: bool
 
 
 @dataclass(frozen=True)
@@ -116,6 +155,76 @@ class RoundClosed(ZendarError):
     """The round is closed: its private scores are shown and no submission is taken."""
 
 
+class StoreUnavailable(sqlite3.OperationalError):
+    """A change could not be written for a reason of the machine's, not of the request.
+
+    The write lock was held by another connection past :data:`BUSY_TIMEOUT_S`, the disk was full,
+    or the disk failed. Still an ``sqlite3.OperationalError``, so whatever handles database errors
+    handles this one; nothing of the change was recorded.
+    """
+
+
+class StoreInUse(ZendarError):
+    """Another server holds the database (see :func:`lock_for_serving`)."""
+
+
+def lock_path(db: str | Path) -> Path:
+    """The lock file a server holds for its whole life: ``<db>.lock`` beside the database."""
+    db = Path(db)
+    return db.with_name(db.name + ".lock")
+
+
+@contextlib.contextmanager
+def lock_for_serving(db: str | Path) -> Iterator[None]:
+    """Hold the database's server lock (an exclusive ``flock`` on ``<db>.lock``) for the block.
+
+    Two servers on one database would each put the other's submission in progress back in the
+    queue and score it twice; the lock is taken before anything else is read or written and the
+    kernel drops it when the process ends, however it ends.
+
+    Raises
+    ------
+    StoreInUse
+        When another process holds it (nothing has been touched).
+    """
+    path = lock_path(db)
+    descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, FILE_MODE)
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise StoreInUse(
+                f"another server is already running on the database {str(db)!r} (it holds {str(path)!r}); "
+                "stop it before starting this one"
+            ) from None
+        yield
+    finally:
+        os.close(descriptor)  # closing the last descriptor releases the lock
+
+
+def _create_private(path: Path) -> None:
+    """Create the database file owner-only (SQLite gives its WAL and shm files the same mode), or make
+    an existing database and its companion files owner-only."""
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, FILE_MODE))
+        return
+    except FileExistsError:
+        pass
+    for file in (path, Path(f"{path}-wal"), Path(f"{path}-shm")):
+        try:
+            if stat.S_IMODE(file.stat().st_mode) & 0o077:
+                file.chmod(FILE_MODE)
+        except FileNotFoundError:
+            continue
+        except PermissionError:
+            log.warning("%s is readable by other users and is not ours to restrict (chmod 600 it)", file)
+
+
+def _read_only_uri(path: Path) -> str:
+    """``file:`` URI of ``path`` opened read-only; ``#``, ``?`` and ``%`` in the path are escaped."""
+    return f"{path.resolve().as_uri()}?mode=ro"
+
+
 class Store:
     """The leaderboard's database. Safe to share between threads (a connection per thread).
 
@@ -136,13 +245,17 @@ class Store:
         if read_only:
             self._connection()  # a missing or unreadable file fails here, not at the first read
         else:
+            _create_private(self.path)
             self._connection().executescript(_SCHEMA)  # idempotent; runs in its own transaction
+            self._migrate()
 
     def _connection(self) -> sqlite3.Connection:
         db = getattr(self._local, "db", None)
         if db is None:
-            target, uri = (f"file:{self.path}?mode=ro", True) if self.read_only else (self.path, False)
-            db = sqlite3.connect(target, uri=uri, timeout=30.0, isolation_level=None, check_same_thread=False)
+            target, uri = (_read_only_uri(self.path), True) if self.read_only else (self.path, False)
+            db = sqlite3.connect(
+                target, uri=uri, timeout=BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False
+            )
             db.row_factory = sqlite3.Row
             if not self.read_only:
                 db.execute("PRAGMA journal_mode=WAL")
@@ -151,26 +264,65 @@ class Store:
             self._local.db = db
         return db
 
-    class _Transaction:
-        def __init__(self, db: sqlite3.Connection) -> None:
-            self.db = db
-
-        def __enter__(self) -> sqlite3.Connection:
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction; a machine-side failure anywhere in it raises :class:`StoreUnavailable`."""
+        db = self._connection()
+        try:
             # IMMEDIATE takes the write lock up front: two writers never deadlock upgrading a read.
-            self.db.execute("BEGIN IMMEDIATE")
-            return self.db
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                yield db
+                # Every change, from this process or an administrator's command, moves the generation
+                # on: readers cache what they built from the database until it moves.
+                db.execute("UPDATE settings SET value = CAST(value AS INTEGER) + 1 WHERE key = 'generation'")
+                db.execute("COMMIT")
+            except BaseException:
+                if db.in_transaction:  # SQLite may have rolled back already (a full disk does)
+                    db.execute("ROLLBACK")
+                raise
+        except sqlite3.OperationalError as exc:
+            if isinstance(exc, StoreUnavailable):
+                raise
+            raise StoreUnavailable(f"the database could not record the change: {exc}") from exc
 
-        def __exit__(self, exc_type, exc, tb) -> None:
-            if exc_type:
-                self.db.execute("ROLLBACK")
-                return
-            # Every change, from this process or an administrator's command, moves the generation
-            # on: readers cache what they built from the database until it moves.
-            self.db.execute("UPDATE settings SET value = CAST(value AS INTEGER) + 1 WHERE key = 'generation'")
-            self.db.execute("COMMIT")
+    def _migrate(self) -> None:
+        """Rebuild a ``submissions`` table of an older layout (ids that could be reused, no quota flag).
 
-    def _transaction(self) -> _Transaction:
-        return Store._Transaction(self._connection())
+        SQLite cannot add ``AUTOINCREMENT`` to a table, so the rows move to a new table in one
+        transaction with foreign keys off (dropping the old table must not cascade to the bodies
+        and scores, which keep referring to ``submissions`` by name), as SQLite documents.
+        """
+        db = self._connection()
+
+        def outdated() -> list[str] | None:
+            sql = db.execute(
+                "SELECT sql FROM sqlite_master WHERE type = 'table' AND name = 'submissions'"
+            ).fetchone()[0]
+            columns = [row["name"] for row in db.execute("PRAGMA table_info(submissions)")]
+            return columns if "AUTOINCREMENT" not in sql.upper() or set(_SUBMISSIONS_COLUMNS) - set(columns) else None
+
+        if outdated() is None:
+            return
+        db.execute("PRAGMA foreign_keys=OFF")  # a no-op inside a transaction: set before it
+        try:
+            with self._transaction():
+                columns = outdated()  # another process may have migrated meanwhile
+                if columns is None:
+                    return
+                kept = ", ".join(c for c in _SUBMISSIONS_COLUMNS if c in columns)
+                db.execute("DROP TABLE IF EXISTS submissions_migrating")
+                db.execute(_SUBMISSIONS_TABLE.format(name="submissions_migrating"))
+                db.execute(f"INSERT INTO submissions_migrating ({kept}) SELECT {kept} FROM submissions")
+                db.execute("DROP TABLE submissions")
+                db.execute("ALTER TABLE submissions_migrating RENAME TO submissions")
+                for statement in _INDEXES.strip().split(";")[:-1]:
+                    db.execute(statement)
+                if db.execute("PRAGMA foreign_key_check").fetchone() is not None:
+                    raise ZendarError(f"the database {str(self.path)!r} has broken references; it was left unchanged")
+            log.warning("database %s: submissions table rebuilt (ids are no longer reused)", self.path)
+        finally:
+            db.execute("PRAGMA foreign_keys=ON")
 
     def generation(self) -> int:
         """A number that changes whenever anything in the database changes."""
@@ -185,15 +337,20 @@ class Store:
     # Teams ---------------------------------------------------------------------------------
 
     def add_team(self, name: str) -> str:
-        """Register a team; returns its token (shown once, never stored)."""
-        if not name.strip() or len(name) > 100:
-            raise ZendarError(f"team name must be 1 to 100 characters, got {len(name.strip())}")
-        token = secrets.token_urlsafe(32)
+        """Register a team under its normalised name; returns its token (shown once, never stored).
+
+        The name rules and the look-alike check are :func:`zendar_leaderboard.names.team_name`'s
+        (:class:`~zendar_leaderboard.names.NameRefused`); checked in the insert's transaction.
+        """
+        # Hexadecimal: a URL-safe token may start with "-", which a command line reads as an option
+        # (`submit --token -x…` failed for one team in 64).
+        token = secrets.token_hex(32)
         try:
             with self._transaction() as db:
+                existing = [row[0] for row in db.execute("SELECT name FROM teams")]
                 db.execute(
                     "INSERT INTO teams (name, token_sha256, created_at) VALUES (?, ?, ?)",
-                    (name, token_hash(token), time.time()),
+                    (team_name(name, existing), token_hash(token), time.time()),
                 )
         except sqlite3.IntegrityError:
             raise ZendarError(f"a team named {name!r} already exists in {str(self.path)!r}") from None
@@ -218,12 +375,10 @@ class Store:
     # Submissions ---------------------------------------------------------------------------
 
     def submissions_in_window(self, team_id: int, now: float | None = None) -> int:
-        """Submissions of the team in the rolling 30 days (queued, scoring, scored or failed)."""
+        """Submissions of the team in the rolling 30 days that count against its quota (queued,
+        scoring, scored, or failed for a reason of the submission's)."""
         now = time.time() if now is None else now
-        return self._connection().execute(
-            "SELECT COUNT(*) FROM submissions WHERE team_id = ? AND submitted_at > ?",
-            (team_id, now - ROLLING_WINDOW_S),
-        ).fetchone()[0]
+        return self._connection().execute(_COUNTED_IN_WINDOW, (team_id, now - ROLLING_WINDOW_S)).fetchone()[0]
 
     def add_submission(self, team: Team, body: bytes, sha256: str, meta: dict, quota: int) -> int:
         """Record a valid submission as queued, with its bytes; returns its id.
@@ -240,10 +395,7 @@ class Store:
         with self._transaction() as db:
             if db.execute("SELECT value FROM settings WHERE key = 'round_closed'").fetchone() is not None:
                 raise RoundClosed("the round is closed: submissions are not taken")
-            used = db.execute(
-                "SELECT COUNT(*) FROM submissions WHERE team_id = ? AND submitted_at > ?",
-                (team.id, now - ROLLING_WINDOW_S),
-            ).fetchone()[0]
+            used = db.execute(_COUNTED_IN_WINDOW, (team.id, now - ROLLING_WINDOW_S)).fetchone()[0]
             if used >= quota:
                 raise QuotaExceeded(
                     f"team {team.name!r} has used its {quota} submissions of the last 30 days"
@@ -261,6 +413,7 @@ class Store:
             id=row["id"], team_id=row["team_id"], team=row["team"], submitted_at=row["submitted_at"],
             status=row["status"], sha256=row["sha256"], meta=json.loads(row["meta"]), error=row["error"],
             hidden=bool(row["hidden"]), scoring_runs=row["scoring_runs"],
+            counts_for_quota=bool(row["counts_for_quota"]),
         )
 
     def submission(self, submission_id: int) -> SubmissionRow | None:
@@ -309,7 +462,8 @@ class Store:
         """Prepare the queue when a server starts.
 
         Submissions left in ``scoring`` by a server that stopped go back to the queue (marked
-        failed after ``MAX_INTERRUPTIONS``); scores computed under another protocol version or
+        failed after ``MAX_INTERRUPTIONS``, not counted against the team's quota: the stops were
+        the server's); scores computed under another protocol version or
         other labels are queued for scoring again.
 
         Returns
@@ -320,9 +474,10 @@ class Store:
         with self._transaction() as db:
             db.execute("UPDATE submissions SET interruptions = interruptions + 1 WHERE status = 'scoring'")
             gave_up = db.execute(
-                "UPDATE submissions SET status = 'failed', finished_at = ?, error = ? "
+                "UPDATE submissions SET status = 'failed', finished_at = ?, error = ?, counts_for_quota = 0 "
                 "WHERE status = 'scoring' AND interruptions >= ?",
-                (time.time(), f"scoring was interrupted {MAX_INTERRUPTIONS} times by server stops", MAX_INTERRUPTIONS),
+                (time.time(), f"scoring was interrupted {MAX_INTERRUPTIONS} times by server stops; {NOT_CHARGED}",
+                 MAX_INTERRUPTIONS),
             ).rowcount
             requeued = db.execute("UPDATE submissions SET status = 'queued' WHERE status = 'scoring'").rowcount
             rescore = db.execute(
@@ -333,9 +488,14 @@ class Store:
         return {"requeued": requeued, "gave_up": gave_up, "rescore": rescore}
 
     def claim_next(self) -> int | None:
-        """Move the oldest queued submission to ``scoring`` and return its id (None: queue empty)."""
+        """Move the oldest queued submission to ``scoring`` and return its id (None: queue empty).
+
+        An empty queue is seen with a read alone: an idle server polls without writing to disk.
+        """
+        if self._connection().execute(_OLDEST_QUEUED).fetchone() is None:
+            return None
         with self._transaction() as db:
-            row = db.execute("SELECT id FROM submissions WHERE status = 'queued' ORDER BY id LIMIT 1").fetchone()
+            row = db.execute(_OLDEST_QUEUED).fetchone()  # another slot may have claimed it meanwhile
             if row is None:
                 return None
             db.execute(
@@ -352,12 +512,15 @@ class Store:
     def record_score(self, submission_id: int, sha256: str, scores: dict[str, Any]) -> bool:
         """Store the score and mark the submission scored, in one transaction.
 
-        Returns False (and stores nothing) when the submission is no longer being scored (deleted).
+        ``sha256`` is that of the bytes the score was computed from: it must be the submission's.
+        Returns False (and stores nothing) when the submission is no longer being scored (deleted)
+        or holds other bytes.
         """
         with self._transaction() as db:
             updated = db.execute(
-                "UPDATE submissions SET status = 'scored', finished_at = ?, error = NULL WHERE id = ? AND status = 'scoring'",
-                (time.time(), submission_id),
+                "UPDATE submissions SET status = 'scored', finished_at = ?, error = NULL "
+                "WHERE id = ? AND sha256 = ? AND status = 'scoring'",
+                (time.time(), submission_id, sha256),
             ).rowcount
             if updated:
                 db.execute(
@@ -371,12 +534,17 @@ class Store:
                 )
         return bool(updated)
 
-    def record_failure(self, submission_id: int, reason: str) -> None:
-        """Mark a submission failed with a reason meant for its team."""
+    def record_failure(self, submission_id: int, reason: str, *, counts_for_quota: bool = True) -> None:
+        """Mark a submission failed with a reason meant for its team.
+
+        ``counts_for_quota=False`` for a failure of the server's (its database, its stops): the
+        submission then no longer counts against the team's quota.
+        """
         with self._transaction() as db:
             db.execute(
-                "UPDATE submissions SET status = 'failed', finished_at = ?, error = ? WHERE id = ? AND status = 'scoring'",
-                (time.time(), reason, submission_id),
+                "UPDATE submissions SET status = 'failed', finished_at = ?, error = ?, counts_for_quota = ? "
+                "WHERE id = ? AND status = 'scoring'",
+                (time.time(), reason, int(counts_for_quota), submission_id),
             )
 
     def score(self, submission_id: int) -> ScoreRow | None:

@@ -5,9 +5,10 @@ its address space is capped with ``resource.setrlimit(RLIMIT_AS)``, the server's
 at the time limit, and it dies with the server (``PR_SET_PDEATHSIG``). It loads the hidden labels
 once, then reads one request per line on stdin, ``{"id": N}``, reads that submission's bytes from
 the database (read-only: only the server writes), and answers one line on its stdout,
-``{"id": N, "ok": true, "sha256": ..., "scores": {...}}`` or ``{"id": N, "ok": false, "error": ...}``.
-Error texts are fixed sentences meant for the submitting team; details go to stderr (the server's
-log).
+``{"id": N, "ok": true, "sha256": ..., "scores": {...}}`` or ``{"id": N, "ok": false, "error": ...}``,
+with ``"store_error": true`` when the database could not be read (the server's fault: it asks again
+later, and never charges the team for it). Error texts are fixed sentences meant for the submitting
+team; details go to stderr (the server's log).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import ctypes
 import os
 import resource
 import signal
+import sqlite3
 import sys
 import traceback
 
@@ -80,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
                     scores = score_submission(checked.document, test_split, bootstrap=args.bootstrap)
                     answer = {"id": submission_id, "ok": True, "sha256": checked.sha256, "scores": scores}
                 del checked
+        except sqlite3.Error as exc:
+            print(f"submission {submission_id}: cannot read it from the database: {exc}", file=sys.stderr)
+            answer.update(error="the database could not be read", store_error=True)
         except MemoryError:
             answer["error"] = f"scoring needed more than the memory limit of {args.memory_mb} MB"
         except Exception:  # any other failure is ours, not the team's: log it, answer plainly

@@ -7,43 +7,21 @@ extra); skipped with a message where they are absent. Screenshots are saved in t
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 
 import pytest
 
+from tests.leaderboard.chromium import chromium
 from tests.leaderboard.conftest import ground_truth, start_server, submission
 from tests.leaderboard.helpers import expected_ap
 from zendar_leaderboard.ground_truth import divide_frames
 from zendar_leaderboard.scoring import format_ap_percent
 from zendar_leaderboard.store import Store
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver")
-
-FLAGS = (
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--window-size=1280,900",
-)
-
 
 @pytest.fixture
 def browser(tmp_path):
-    if CHROMIUM is None or CHROMEDRIVER is None:
-        pytest.skip("Chromium is not installed (apt-get install chromium chromium-driver): no browser to drive")
-    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[test]')")
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for flag in FLAGS:
-        options.add_argument(flag)
-    options.add_argument(f"--user-data-dir={tmp_path / 'chromium-profile'}")
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
-    driver.set_page_load_timeout(60)
-    yield driver
-    driver.quit()
+    yield from chromium(tmp_path / "chromium-profile")
 
 
 @pytest.mark.slow

@@ -48,16 +48,16 @@ def test_a_body_over_the_limit_is_refused_before_it_is_read(board):
     head = (f"POST /api/submissions HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {token}\r\n"
             "Content-Type: application/json\r\nContent-Length: 10000000000\r\n\r\n").encode()
     answer = raw_exchange(board.url, head)
-    assert answer.startswith(b"HTTP/1.0 413") and b"over the limit of 5,000,000 bytes" in answer
+    assert answer.startswith(b"HTTP/1.1 413") and b"over the limit of 5,000,000 bytes" in answer
     # A client that waits for 100 Continue is told before sending anything.
     answer = raw_exchange(board.url, head.replace(b"\r\n\r\n", b"\r\nExpect: 100-continue\r\n\r\n"))
-    assert answer.startswith(b"HTTP/1.0 413") and b"100 Continue" not in answer
+    assert answer.startswith(b"HTTP/1.1 413") and b"100 Continue" not in answer
     # No length at all: 411.
     answer = raw_exchange(board.url, head.replace(b"Content-Length: 10000000000\r\n", b""))
-    assert answer.startswith(b"HTTP/1.0 411")
+    assert answer.startswith(b"HTTP/1.1 411")
     # A length that str.isdigit() accepts but int() does not (latin-1 '\xb2' is a superscript two): 400.
     answer = raw_exchange(board.url, head.replace(b"Content-Length: 10000000000", b"Content-Length: \xb2"))
-    assert answer.startswith(b"HTTP/1.0 400") and b"Content-Length" in answer
+    assert answer.startswith(b"HTTP/1.1 400") and b"Content-Length" in answer
     assert board.store.submissions_in_window(board.store.team_for_token(token).id) == 0
 
 

@@ -12,6 +12,7 @@ import gc
 import json
 import math
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from itertools import chain
 from pathlib import Path
@@ -93,6 +94,8 @@ class CheckedInput:
         The predictions' ``meta`` object (empty for ground truth).
     split
         The split named by a ground-truth source, when known.
+    problems_not_listed
+        Problems found beyond the ``max_problems`` asked for: counted, their text not kept.
     """
 
     table: DetectionTable | None
@@ -100,6 +103,30 @@ class CheckedInput:
     problems: list[str]
     meta: dict = field(default_factory=dict)
     split: str | None = None
+    problems_not_listed: int = 0
+
+
+class _Problems:
+    """Problems in the order found: the first ``max_problems`` kept, the rest only counted.
+
+    A hostile input can hold millions of faults in a few bytes each; past the cap each message is
+    dropped as soon as it is made, so the memory kept does not grow with the input.
+    """
+
+    def __init__(self, max_problems: int | None) -> None:
+        self.max_problems = max_problems
+        self.listed: list[str] = []
+        self.not_listed = 0
+
+    def add(self, problem: str) -> None:
+        if self.max_problems is None or len(self.listed) < self.max_problems:
+            self.listed.append(problem)
+        else:
+            self.not_listed += 1
+
+    def extend(self, problems: Iterable[str]) -> None:
+        for problem in problems:
+            self.add(problem)
 
 
 @contextlib.contextmanager
@@ -255,31 +282,54 @@ def _optional_suspects(flat: list[dict], optional: tuple[str, ...]) -> np.ndarra
 
 
 def _frame_problems(
-    frames: dict, who: str, max_per_frame: int | None
-) -> tuple[list[str], list[str], list[str], list[list]]:
-    """Per-frame checks: (problems, all string frame ids, ids of frames with a list, those lists)."""
-    problems: list[str] = []
+    frames: dict, who: str, max_per_frame: int | None, problems: _Problems
+) -> tuple[list[str], list[str], list[list]]:
+    """Per-frame checks into ``problems``: (all string frame ids, ids of frames with a list, those lists)."""
     all_frame_ids: list[str] = []
     frame_ids: list[str] = []
     lists: list[list] = []
     for frame_id, detections in frames.items():
         if not isinstance(frame_id, str):
-            problems.append(f"{who} frame id {_short(frame_id)} is not a string")
+            problems.add(f"{who} frame id {_short(frame_id)} is not a string")
             continue
         all_frame_ids.append(frame_id)
         if not isinstance(detections, list):
-            problems.append(
+            problems.add(
                 f"{who} frame {frame_id!r}: expected a list of detections, got {_type_name(detections)}"
             )
             continue
         if max_per_frame is not None and len(detections) > max_per_frame:
-            problems.append(
+            problems.add(
                 f"{who} frame {frame_id!r}: {len(detections)} detections, more than the limit of "
                 f"{max_per_frame} per frame"
             )
         frame_ids.append(frame_id)
         lists.append(detections)
-    return problems, all_frame_ids, frame_ids, lists
+    return all_frame_ids, frame_ids, lists
+
+
+#: Suspect detections are named this many at a time: one Python int per suspect for millions of
+#: them would cost more memory than the input itself.
+_SUSPECT_CHUNK = 65_536
+
+
+def _suspect_problems(
+    who: str,
+    frame_ids: list[str],
+    offsets: np.ndarray,
+    flat: list[Any],
+    suspects: np.ndarray | range,
+    required: tuple[str, ...],
+    optional: tuple[str, ...],
+    problems: _Problems,
+) -> None:
+    """The problems of the detections at the flat rows ``suspects``, into ``problems``."""
+    for start in range(0, len(suspects), _SUSPECT_CHUNK):
+        rows = np.asarray(suspects[start:start + _SUSPECT_CHUNK], dtype=np.int64)
+        frame_of = np.searchsorted(offsets, rows, side="right") - 1
+        for row, frame in zip(rows.tolist(), frame_of.tolist()):
+            index = row - int(offsets[frame])
+            problems.extend(_detection_problems(who, frame_ids[frame], index, flat[row], required, optional))
 
 
 def read_frames(
@@ -289,6 +339,7 @@ def read_frames(
     required: tuple[str, ...],
     optional: tuple[str, ...] = (),
     max_per_frame: int | None = None,
+    max_problems: int | None = None,
 ) -> CheckedInput:
     """Check a ``{frame_id: [detection, ...]}`` mapping and turn it into a :class:`DetectionTable`.
 
@@ -304,28 +355,31 @@ def read_frames(
         Keys that, when present, must be finite numbers.
     max_per_frame
         Limit on detections per frame, or None.
+    max_problems
+        Keep the text of at most this many problems and only count the rest
+        (``problems_not_listed``); None keeps every one.
 
     Returns
     -------
     CheckedInput
     """
-    problems: list[str] = []
+    problems = _Problems(max_problems)
     frame_ids = all_frame_ids = list(frames)
     lists = list(frames.values())
     frames_ok = set(map(type, frame_ids)) <= {str} and set(map(type, lists)) <= {list}
     counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists)) if frames_ok else None
     if counts is None or (max_per_frame is not None and len(counts) and counts.max() > max_per_frame):
         # Something is wrong with the frames themselves: find and name each.
-        problems, all_frame_ids, frame_ids, lists = _frame_problems(frames, who, max_per_frame)
+        all_frame_ids, frame_ids, lists = _frame_problems(frames, who, max_per_frame, problems)
         counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
     offsets = np.zeros(len(lists) + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     flat = list(chain.from_iterable(lists))
     columns = _columns(flat, required)
 
-    suspects: np.ndarray
+    suspects: np.ndarray | range
     if columns is None:
-        suspects = np.arange(len(flat))
+        suspects = range(len(flat))
     else:
         finite = np.ones(len(flat), dtype=bool)
         for values in columns.values():
@@ -336,16 +390,10 @@ def read_frames(
             suspect |= _optional_suspects(flat, optional)
         suspects = np.flatnonzero(suspect)
 
-    if len(suspects):
-        frame_of = np.searchsorted(offsets, suspects, side="right") - 1
-        for row, frame in zip(suspects.tolist(), frame_of.tolist()):
-            index = row - int(offsets[frame])
-            problems += _detection_problems(
-                who, frame_ids[frame], index, flat[row], required, optional
-            )
+    _suspect_problems(who, frame_ids, offsets, flat, suspects, required, optional, problems)
 
-    if problems or columns is None:
-        return CheckedInput(None, all_frame_ids, problems)
+    if problems.listed or problems.not_listed or columns is None:
+        return CheckedInput(None, all_frame_ids, problems.listed, problems_not_listed=problems.not_listed)
     table = DetectionTable(
         frame_ids=frame_ids,
         offsets=offsets,
@@ -356,8 +404,12 @@ def read_frames(
     return CheckedInput(table, all_frame_ids, [])
 
 
-def read_predictions(document: Any) -> CheckedInput:
-    """Check a predictions document ``{"meta": {...}, "results": {frame_id: [...]}}``."""
+def read_predictions(document: Any, *, max_problems: int | None = None) -> CheckedInput:
+    """Check a predictions document ``{"meta": {...}, "results": {frame_id: [...]}}``.
+
+    ``max_problems`` keeps the text of at most that many problems of the detections and frames and
+    counts the rest in ``problems_not_listed`` (None: every one, as ``zendar-eval`` reports them).
+    """
     if not isinstance(document, dict):
         return CheckedInput(None, None, [
             "predictions: expected a JSON object with 'meta' and 'results', "
@@ -388,10 +440,11 @@ def read_predictions(document: Any) -> CheckedInput:
         required=PREDICTION_REQUIRED,
         optional=PREDICTION_OPTIONAL,
         max_per_frame=MAX_DETECTIONS_PER_FRAME,
+        max_problems=max_problems,
     )
     checked.problems[:0] = problems
     checked.meta = meta
-    if checked.problems:
+    if checked.problems or checked.problems_not_listed:
         checked.table = None
     return checked
 
@@ -420,24 +473,31 @@ def read_ground_truth_document(document: Any) -> CheckedInput:
     return checked
 
 
+#: How a missing frame is explained to ``zendar-eval``'s users.
+MISSING_FRAME_HINT = "give [] for a frame without detections, or use --partial to evaluate a subset"
+
+
 def frame_set_problems(pred_frame_ids: list[str], gt_frame_ids: list[str], *, partial: bool) -> list[str]:
     """Frames that are in one input and not in the other.
 
     Every ground-truth frame must appear in the predictions (an empty list says "no detections")
     unless ``partial``; every prediction frame must be a ground-truth frame.
     """
-    problems = []
+    return list(iter_frame_set_problems(pred_frame_ids, gt_frame_ids, partial=partial))
+
+
+def iter_frame_set_problems(
+    pred_frame_ids: list[str], gt_frame_ids: list[str], *, partial: bool, missing_hint: str = MISSING_FRAME_HINT
+) -> Iterator[str]:
+    """:func:`frame_set_problems` one at a time (a caller may keep only the first few), a missing
+    frame explained by ``missing_hint``."""
     gt_ids = set(gt_frame_ids)
-    pred_ids = set(pred_frame_ids)
     for frame_id in pred_frame_ids:
         if frame_id not in gt_ids:
             hint = "" if "/" in frame_id else " (frame ids are '<scene_id>/<timestamp_ns>')"
-            problems.append(f"predictions frame {frame_id!r} is not in the ground truth{hint}")
+            yield f"predictions frame {frame_id!r} is not in the ground truth{hint}"
     if not partial:
+        pred_ids = set(pred_frame_ids)
         for frame_id in gt_frame_ids:
             if frame_id not in pred_ids:
-                problems.append(
-                    f"ground truth frame {frame_id!r} is missing from predictions 'results' "
-                    "(give [] for a frame without detections, or use --partial to evaluate a subset)"
-                )
-    return problems
+                yield f"ground truth frame {frame_id!r} is missing from predictions 'results' ({missing_hint})"
