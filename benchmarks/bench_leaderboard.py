@@ -1,9 +1,11 @@
 """Claims: the leaderboard validates and scores submissions at a steady rate on 2 cores, for a test
 split of the demo's size and for 100,000 frames, and serves its ranking page to 50 concurrent
-readers with a bounded latency.
+readers with a bounded latency; an upload's peak memory in the server stays within 40 times its
+size, valid or hostile; two slow-body uploads do not slow other uploads down.
 
 Run: python benchmarks/bench_leaderboard.py [--demo-submissions 20] [--large-frames 100000]
      [--large-submissions 3] [--readers 50] [--reads-per-reader 20] [--entries 30]
+     [--parts demo,large,latency,memory,slow]
 
 Each part starts a real ``zendar-leaderboard serve`` (default settings: one scorer process,
 200 bootstrap resamples) on 127.0.0.1 with synthetic hidden labels, uploads from as many teams as
@@ -11,6 +13,12 @@ there are submissions, all at once, and times from the first upload to the last 
 includes the server's validation before queueing, the queue, and the scorer. Readers then fetch
 ``GET /`` in a bounded loop (loopback only). The load average is printed before and after: figures
 taken at a load above the CPU count are upper bounds on the time.
+
+``memory``: a fresh server per upload; its peak resident memory is reset (``/proc/PID/clear_refs``)
+before the upload and read (``VmHWM``) after it is answered: the peak per upload is the growth over
+the resident memory before. ``slow``: uploads per second of a small valid file, one after another,
+with no other client and then with two slow-body uploads connected (each declares 1 MB and sends a
+byte every 5 s).
 """
 
 from __future__ import annotations
@@ -20,9 +28,11 @@ import json
 import math
 import os
 import random
+import select
 import statistics
 import sys
 import tempfile
+import threading
 import time
 import urllib.request
 from concurrent.futures import ThreadPoolExecutor
@@ -31,6 +41,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tests.leaderboard.adversarial.rawhttp import connect, upload_head  # noqa: E402
 from tests.leaderboard.conftest import meta, start_server  # noqa: E402
 from tests.leaderboard.helpers import post_submission, wait_done  # noqa: E402
 from zendar_leaderboard.ground_truth import TestSplit, divide_frames, frames_sha256  # noqa: E402
@@ -139,6 +150,104 @@ def read_latency(db: Path, gt: dict, work: Path, readers: int, reads_per_reader:
     print(f"  {len(latencies) / elapsed:.0f} pages per second")
 
 
+def _status_kb(pid: int, field: str) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise KeyError(field)
+
+
+def _peak_growth_bytes(server, token: str, body: bytes) -> tuple[int, int]:
+    """(status, growth of the server's peak resident memory over its resident memory before) of one upload."""
+    pid = server.process.pid
+    Path(f"/proc/{pid}/clear_refs").write_text("5")  # the peak resident size starts again from now
+    before_kb = _status_kb(pid, "VmRSS")
+    status, _ = post_submission(server.url, token, body)
+    return status, 1024 * (_status_kb(pid, "VmHWM") - before_kb)
+
+
+def upload_memory(work: Path) -> None:
+    """Peak server memory per upload, for dense valid uploads and hostile ones of 1 and 3 MB."""
+    print("\npeak server memory per upload (fresh server each, default settings)")
+    cases = []
+    for size_mb, n_scenes in ((1, 26), (3, 78)):
+        gt = labels(n_scenes=n_scenes, frames_per_scene=200, cars=(1, 5))
+        body = predictions(gt, seed=1)
+        cases.append((f"dense valid, {len(gt['frames']):,} frames", gt, body))
+    small_gt = labels(n_scenes=1, frames_per_scene=60, cars=(5, 10))
+    for size_mb in (1, 3):
+        n = size_mb * 1_000_000
+        empty = b'{"meta":{},"results":{"a/1":[' + b"{}," * (n // 3) + b"{}]}}"
+        one_key = b'{"meta":{},"results":{"a/1":[' + b'{"a":0.5},' * (n // 10) + b"{}]}}"
+        cases.append(("hostile [{},{},...]", small_gt, empty))
+        cases.append(('densest allowed [{"a":0.5},...]', small_gt, one_key))
+    cases.sort(key=lambda case: len(case[2]))
+    for k, (name, gt, body) in enumerate(cases):
+        gt_path = work / f"memory-{k}-gt.json"
+        gt_path.write_text(json.dumps(gt))
+        db = work / f"memory-{k}.db"
+        store = Store(db)
+        warm_token, token = store.add_team("warm"), store.add_team("measured")
+        server = start_server(db, gt_path)
+        try:
+            post_submission(server.url, warm_token, b'{"meta":{},"results":{"a/1":[{}]}}')  # first-use costs
+            status, growth = _peak_growth_bytes(server, token, body)
+        finally:
+            server.stop()
+        print(f"  {name:<36} {len(body) / 1e6:5.2f} MB -> {status}: peak +{growth / 1e6:6.1f} MB "
+              f"= {growth / len(body):4.1f} x the upload")
+
+
+class SlowBody(threading.Thread):
+    """An upload that declares 1 MB and sends one byte every 5 s until stopped."""
+
+    def __init__(self, url: str, token: str) -> None:
+        super().__init__(daemon=True)
+        self.sock = connect(url)
+        self.sock.sendall(upload_head(token, 1_000_000))
+        self.stopped = threading.Event()
+
+    def run(self) -> None:
+        try:
+            while not self.stopped.wait(5.0) and not select.select([self.sock], [], [], 0)[0]:
+                self.sock.sendall(b" ")
+        except OSError:
+            pass
+        finally:
+            self.sock.close()
+
+
+def slow_body_throughput(work: Path, n_uploads: int) -> None:
+    """Uploads per second of a small valid file with no other client, then with two slow bodies connected."""
+    gt = labels(n_scenes=1, frames_per_scene=60, cars=(5, 10))
+    gt_path = work / "slow-gt.json"
+    gt_path.write_text(json.dumps(gt))
+    db = work / "slow.db"
+    store = Store(db)
+    token = store.add_team("uploader")
+    attacker_tokens = [store.add_team(f"slow-{k}") for k in range(2)]
+    body = predictions(gt, seed=1)
+    server = start_server(db, gt_path, "--quota", str(2 * n_uploads + 1))
+    try:
+        post_submission(server.url, token, body)  # warm-up
+        print(f"\nuploads of a {len(body) / 1e3:.0f} kB valid file, {n_uploads} one after another (default settings)")
+        for label, n_slow in (("no other client", 0), ("2 slow-body uploads connected", 2)):
+            slow = [SlowBody(server.url, attacker_tokens[k]) for k in range(n_slow)]
+            for attacker in slow:
+                attacker.start()
+            time.sleep(0.5 if slow else 0)
+            started = time.monotonic()
+            statuses = [post_submission(server.url, token, body)[0] for _ in range(n_uploads)]
+            elapsed = time.monotonic() - started
+            for attacker in slow:
+                attacker.stopped.set()
+                attacker.join()
+            assert statuses == [202] * n_uploads, statuses
+            print(f"  {label:<32} {n_uploads / elapsed:6.1f} uploads/s")
+    finally:
+        server.stop()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--demo-submissions", type=int, default=20)
@@ -147,7 +256,8 @@ def main() -> None:
     parser.add_argument("--readers", type=int, default=50)
     parser.add_argument("--reads-per-reader", type=int, default=20)
     parser.add_argument("--entries", type=int, default=30, help="scored entries on the ranking page")
-    parser.add_argument("--parts", default="demo,large,latency", help="which parts to run (comma-separated)")
+    parser.add_argument("--slow-uploads", type=int, default=40, help="uploads timed in the slow-body part")
+    parser.add_argument("--parts", default="demo,large,latency,memory,slow", help="which parts to run (comma-separated)")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} CPUs)")
     with tempfile.TemporaryDirectory() as tmp:
@@ -163,6 +273,10 @@ def main() -> None:
         if "latency" in parts:
             entries_db = throughput("ranking", demo, args.entries, work)  # its entries fill the ranking page
             read_latency(entries_db, demo, work, args.readers, args.reads_per_reader)
+        if "memory" in parts:
+            upload_memory(work)
+        if "slow" in parts:
+            slow_body_throughput(work, args.slow_uploads)
     print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
