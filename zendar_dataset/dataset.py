@@ -135,6 +135,9 @@ class ZendarDataset(Dataset):
     None for a scene whose labels are withheld), ``sync`` (``"<group>/<sensor>"``
     -> Δt = element − reference in ns, or None) and, with the tracklog,
     ``ecef_T_ego`` / ``enu_T_ego`` ([4, 4] float64 at the reference time).
+    A SAR ``image`` is ``[H, W]`` as stored: complex64, or for a magnitude-only stream of an
+    imported recording its exact real magnitudes (uint32 or float32; docs/format.md); ``np.abs``
+    gives the magnitude of both.
     """
 
     def __init__(

@@ -54,7 +54,9 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"training and data configuration (default: {DEFAULT_CONFIG}; with --quick: {QUICK_CONFIG})")
     parser.add_argument("--data", default=None,
                         help="dataset root to use, simulated there when absent (default: a cache directory under "
-                        "$XDG_CACHE_HOME/zendar-dataset/bench)")
+                        "$XDG_CACHE_HOME/zendar-dataset/bench); on a dataset without manual labels (an imported "
+                        "release) only automatic labels, the CFAR predictions and pretraining run, the rest is listed "
+                        "as skipped")
     parser.add_argument("--seeds", type=seed_count(MAX_SEEDS), default=None,
                         help="training seeds per CNN row; mean and std over them (default: the config's; 1 with --quick)")
     parser.add_argument("--jobs", "-j", type=whole_number("--jobs", 1), default=None, metavar="N",
@@ -145,8 +147,11 @@ def _bench(args: argparse.Namespace) -> int:
     data = None if args.data is None else Path(args.data).absolute()
     options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device, jobs=args.jobs,
                            ablations=args.ablations)
-    run_bench(options)
-    print(f"wrote {Path(args.out) / 'table.md'}, table.csv, results.json, pr_*.png, bev.png and rows/")
+    results = run_bench(options)
+    if results.get("manual_labels") is False:
+        print(f"wrote {Path(args.out) / 'table.md'}, results.json and rows/ (no manual labels: the steps that need none)")
+    else:
+        print(f"wrote {Path(args.out) / 'table.md'}, table.csv, results.json, pr_*.png, bev.png and rows/")
     return 0
 
 

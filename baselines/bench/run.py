@@ -3,6 +3,8 @@
 The steps, each cached in the run directory under a key of its inputs (:mod:`run_directory`):
 
 1. the dataset: ``--data`` or one simulated into the cache (``$XDG_CACHE_HOME/zendar-dataset/bench``);
+   on a dataset without manual labels (an imported release) only the steps that need none run
+   (:mod:`unlabelled`);
 2. the semi-supervised split of the training scenes (``split.json``, checksummed);
 3. automatic labels of every training scene (a side store beside, never inside, the dataset) and
    their precision and recall against the manual labels, per band;
@@ -93,10 +95,12 @@ def say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
-def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex]:
-    """The dataset to run on, and it opened: simulated (resumably) when absent; checked to have labels
-    where needed."""
+def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex, bool]:
+    """The dataset to run on, it opened, and whether it has manual labels: simulated (resumably) when
+    absent; checked to have labels where needed, unless no scene has any (:mod:`unlabelled`)."""
     from zendar_dataset.sim.generate import synthesize_dataset
+
+    from zendar_baselines.bench.unlabelled import has_no_labels
 
     config = options.config
     root = options.data if options.data is not None else default_data_dir(config)
@@ -106,16 +110,19 @@ def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex]:
         synthesize_dataset(root, profile=config.sim_profile, n_scenes=config.n_scenes, seed=config.sim_seed,
                            progress=True, jobs=synthesis_jobs(config.n_scenes))
     index = open_dataset(str(root))
+    if has_no_labels(index):
+        return root, index, False
     problems = []
     for split in ("train", "test"):
         if not index.scene_ids(split):
             problems.append(f"split {split!r} has no scenes")
     for scene_id in index.scene_ids("train") + index.scene_ids("test"):
         if index.open_scene(scene_id).labels() is None:
-            problems.append(f"scene {scene_id} has no labels (the bench trains on the train split's and scores the test split's)")
+            problems.append(f"scene {scene_id} has no labels (the bench trains on the train split's and scores the test split's; "
+                            "on a dataset where no scene has any, only the steps that need none run)")
     if problems:
         raise ZendarError(f"{root}: cannot run the benchmark on this dataset:\n  " + "\n  ".join(problems))
-    return root, index
+    return root, index, True
 
 
 def synthesis_jobs(n_scenes: int) -> int:
@@ -138,8 +145,12 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     started = time.monotonic()
     config = options.config
     RunDirectory.check_owner(options.out, {"config": config.name})
-    root, dataset = ensure_dataset(options)
+    root, dataset, labelled = ensure_dataset(options)
     context = RunContext.open(root, config, options.out, options.device, dataset)
+    if not labelled:
+        from zendar_baselines.bench.unlabelled import run_unlabelled_bench
+
+        return run_unlabelled_bench(context, options.seeds)
     run = RunDirectory(options.out, {"config": config.name, "dataset": context.fingerprint})
     base_inputs = context.step_inputs()
 

@@ -75,6 +75,8 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
     if not (out / RUN_MARKER).is_file() or not (out / "results.json").is_file():
         raise ZendarError(f"--out {out}: not a finished zendar-bench run (no {RUN_MARKER} and results.json)")
     results = read_json(out / "results.json")
+    if isinstance(results, dict) and results.get("manual_labels") is False:
+        raise ZendarError(f"--out {out}: a run on a dataset without manual labels scored nothing, so there is nothing to re-score")
     try:
         config = _config_from_json(results["config"])
         root = Path(results["dataset"]["root"])

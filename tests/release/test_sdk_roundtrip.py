@@ -34,8 +34,16 @@ def _point_values(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
     return {name: rng.normal(size=n).astype(np.float32) for name in names}
 
 
-def _write_release(root, generation: str) -> dict:
-    """One scene of every converted stream kind, written with the SDK's ``generation`` definitions."""
+# IMU (forward, right, down) -> (x forward, y left, z up): 180 degrees about x.
+FLU_FROM_FRD = np.diag([1.0, -1.0, -1.0])
+
+
+def _write_release(root, generation: str, flu_attitude: bool = False) -> dict:
+    """One scene of every converted stream kind, written with the SDK's ``generation`` definitions.
+
+    ``flu_attitude``: each ``Image.attitude`` rotates x-forward, y-left, z-up vectors into ECEF instead
+    of the paper's forward-right-down ones.
+    """
     m = sdk(generation)
     rng = np.random.default_rng(11)
     scene = root / "2020-02-03_2252" / "001"
@@ -52,7 +60,7 @@ def _write_release(root, generation: str) -> dict:
             image = m["Image"]()
             top = image if generation == "2020" else image.meta
             top.timestamp = frame.timestamp_s
-            _set_quat(top.attitude, fx.wxyz(R_ecef_imu))
+            _set_quat(top.attitude, fx.wxyz(R_ecef_imu @ FLU_FROM_FRD if flu_attitude else R_ecef_imu))
             _set_vec(top.position, fx.enu_to_ecef(p_enu))
             top.frame_id = k
             if generation == "2021":

@@ -7,6 +7,7 @@ import errno
 import sys
 
 from zendar_dataset.cli.common import EXIT_FAILURE, EXIT_USAGE
+from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.schema import SPLITS
 
 # OS errors that are the environment's fault (disk full, read-only, no permission): exit 1, not 2.
@@ -31,7 +32,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--skip-corrupt", action="store_true",
                         help="skip truncated or corrupt stretches of streams (reported) instead of stopping")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
+    parser.add_argument(
+        "--sides", type=_stated_sides, default=None, metavar="SERIAL=left,SERIAL=right",
+        help="which radar serial is on which side, when known: taken instead of deciding it from the images' "
+        "attitude and the path driven (needed when those disagree); in a scene where it names some radars, "
+        "the others keep their serials",
+    )
     parser.set_defaults(func=_run)
+
+
+def _stated_sides(text: str) -> dict[str, str]:
+    from zendar_dataset.release.sides import parse_stated_sides
+
+    try:
+        return parse_stated_sides(text)
+    except ZendarError as exc:
+        # Raised as an ArgumentError without an argument, argparse prints the message alone (exit 2).
+        raise argparse.ArgumentError(None, str(exc)) from None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -45,6 +62,7 @@ def _run(args: argparse.Namespace) -> int:
             split=args.split,
             skip_corrupt=args.skip_corrupt,
             backend=args.backend,
+            sides=args.sides,
             log=lambda scene_id: print(f"importing {scene_id} ...", file=sys.stderr),
         )
     except FileNotFoundError:

@@ -20,10 +20,13 @@ from zendar_dataset.format.schema import (
     ENU_ORIGIN_KEYS,
     EXTRA_SENSOR_GROUPS,
     LABELS,
+    SAR_MAGNITUDE_DTYPES,
+    SAR_MAGNITUDE_ONLY_ATTR,
     SENSOR_GROUPS,
     TIME_REFERENCE,
     TRACKLOG,
     ArraySpec,
+    accepted_dtypes,
     expected_first_dim,
     optional_specs,
     stream_specs,
@@ -89,8 +92,10 @@ def check_array(
         return None
     dtype = np.dtype(node.dtype)
     ok = True
-    if dtype != spec.dtype:
-        problems.append(f"{scene}: {path}: expected dtype {spec.dtype.name}, found {dtype.name}")
+    accepted = accepted_dtypes(stream, spec)
+    if dtype not in accepted:
+        others = f" (or {', '.join(d.name for d in accepted[1:])} for a magnitude-only image)" if len(accepted) > 1 else ""
+        problems.append(f"{scene}: {path}: expected dtype {spec.dtype.name}{others}, found {dtype.name}")
         ok = False
     shape = tuple(node.shape)
     if len(shape) != spec.ndim:
@@ -237,6 +242,27 @@ def _check_sensor_calibration(meta: SceneMetadata, scene: str, stream: str, arra
             )
 
 
+def _check_sar_layout(root: Any, scene: str, stream: str, arrays: dict, problems: list[str]) -> None:
+    """``magnitude_only`` is a bool, and true wherever ``image`` holds real magnitudes (docs/format.md).
+
+    A complex64 image with ``magnitude_only`` true is the layout of stores written before magnitude
+    images existed (the magnitude in the real part): still valid.
+    """
+    group = get_node(root, scene, stream, problems)
+    if group is None:
+        return
+    value = stores.read_attrs(group).get(SAR_MAGNITUDE_ONLY_ATTR)
+    if value is not None and not isinstance(value, bool):
+        problems.append(f"{scene}: {stream}: expected attribute {SAR_MAGNITUDE_ONLY_ATTR} true or false, found {value!r}")
+        return
+    image = arrays.get("image")
+    if image is not None and np.dtype(image.dtype) in SAR_MAGNITUDE_DTYPES and value is not True:
+        problems.append(
+            f"{scene}: {stream}/image: expected attribute {SAR_MAGNITUDE_ONLY_ATTR} true on {stream} for an image of "
+            f"{np.dtype(image.dtype).name} magnitudes, found " + ("none" if value is None else repr(value))
+        )
+
+
 def check_scene_metadata(root: Any, scene: str, expected_scene_id: str | None = None) -> tuple[SceneMetadata, list[str]]:
     """Check a scene's attributes, calibration and every array's dtype and shape.
 
@@ -270,6 +296,8 @@ def check_scene_metadata(root: Any, scene: str, expected_scene_id: str | None = 
             arrays = check_stream(root, scene, stream, problems, meta.records_checksums)
             meta.arrays.update({f"{stream}/{name}": node for name, node in arrays.items()})
             _check_sensor_calibration(meta, scene, stream, arrays, problems)
+            if group == "sar":
+                _check_sar_layout(root, scene, stream, arrays, problems)
             meta.streams.append(stream)
     for stream in (TRACKLOG, LABELS):
         if get_node(root, scene, stream, problems) is not None:

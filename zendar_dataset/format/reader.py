@@ -25,6 +25,7 @@ from zendar_dataset.format.schema import (
     LABEL_FIELD_NAMES,
     LABEL_OPTIONAL_FIELD_NAMES,
     LABELS,
+    SAR_MAGNITUDE_ONLY_ATTR,
     SENSOR_GROUPS,
     SPLITS,
 )
@@ -538,6 +539,17 @@ class SceneReader:
                     raise ZendarFormatError(f"{self.scene_id}: {path}: {checksums.ARRAY_ATTR}: {exc}") from None
             crc32c = self._crc32c[path]
         return StoredArray(node, self.scene_id, path, checksummed=self.records_checksums, verify_crc32c=crc32c)
+
+    def sar_magnitude_only(self, sensor: str) -> bool:
+        """Whether ``sar/<sensor>`` holds magnitudes only (group attribute ``magnitude_only``; docs/format.md).
+
+        Its ``image`` is then real (uint32 or float32, exact) or, in stores written before magnitude
+        images existed, complex64 with the magnitude in the real part; either way it has no phase.
+        """
+        stream = f"sar/{sensor}"
+        if stream not in self.streams:
+            raise ZendarFormatError(f"{self.scene_id}: {stream}: expected one of the scene's SAR streams {self.sensors('sar')}, found none")
+        return stores.read_attrs(stores.get_node(self._root, stream)).get(SAR_MAGNITUDE_ONLY_ATTR) is True
 
     def timestamps(self, stream: str) -> np.ndarray:
         """``timestamp_ns`` [N] int64 of a stream (``"radar/left"``, ``"tracklog"``, ``"labels/moving_cars"``…).

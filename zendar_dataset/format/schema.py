@@ -104,6 +104,11 @@ LABEL_FIELDS: tuple[ArraySpec, ...] = (
     _spec("track_id", "int64", "N"),
 )
 LABEL_FIELD_NAMES = tuple(spec.name for spec in LABEL_FIELDS)
+# Magnitude-only SAR images (a backward-compatible addition): ``sar/<radar>/image`` may hold the
+# recording's real magnitudes as recorded, exactly, when the group's ``magnitude_only`` is true.
+SAR_MAGNITUDE_ONLY_ATTR = "magnitude_only"
+SAR_MAGNITUDE_DTYPES: tuple[np.dtype, ...] = (np.dtype("uint32"), np.dtype("float32"))
+SAR_IMAGE_DTYPES: tuple[np.dtype, ...] = (np.dtype("complex64"), *SAR_MAGNITUDE_DTYPES)
 # Optional per-frame arrays of a SAR stream (a backward-compatible addition): ego_stopped marks the
 # frames whose synthetic aperture includes a moment when the ego stood still.
 SAR_OPTIONAL_ARRAYS: tuple[ArraySpec, ...] = (_spec("ego_stopped", "bool", "N"),)
@@ -123,6 +128,13 @@ def optional_specs(stream: str) -> tuple[ArraySpec, ...]:
     if stream == LABELS:
         return LABEL_OPTIONAL_FIELDS
     return SAR_OPTIONAL_ARRAYS if stream.split("/", 1)[0] == "sar" else ()
+
+
+def accepted_dtypes(stream: str, spec: ArraySpec) -> tuple[np.dtype, ...]:
+    """The dtypes an array may have: its spec's, and for a SAR ``image`` also the magnitude dtypes."""
+    if spec.name == "image" and stream.split("/", 1)[0] == "sar":
+        return SAR_IMAGE_DTYPES
+    return (spec.dtype,)
 
 
 def stream_specs(stream: str) -> tuple[ArraySpec, ...]:

@@ -38,6 +38,8 @@ from zendar_dataset.format.schema import (
     LABEL_FIELDS,
     LABEL_OPTIONAL_FIELDS,
     LABELS,
+    SAR_MAGNITUDE_DTYPES,
+    SAR_MAGNITUDE_ONLY_ATTR,
     SPLITS,
     STREAM_ARRAYS,
     TIME_REFERENCE,
@@ -90,6 +92,7 @@ class _Stream:
     timestamps: list[int] = field(default_factory=list)
     small: dict[str, list[np.ndarray]] = field(default_factory=dict)
     bulk: Any = None
+    appender: stores.FrameAppender | None = None  # appends to ``bulk`` when it is stored one frame per chunk
     frame_shape: tuple[int, ...] | None = None
     pending_points: list[np.ndarray] = field(default_factory=list)
     pending_rows: int = 0
@@ -151,6 +154,7 @@ class SceneWriter:
         self._streams: dict[str, _Stream] = {}
         self._tracklog_written = False
         self._labels: dict[str, np.ndarray] | None = None
+        self._pending_small: list[stores.NewArray] = []  # written by _flush_small
         self.path.parent.mkdir(parents=True, exist_ok=True)
         temporary.remove_stale_temporaries(self.path.parent, self.path.name)  # left by a killed writer
         self._temp_path = temporary.temporary_sibling(self.path)
@@ -233,15 +237,14 @@ class SceneWriter:
                 kind=kind,
                 resizable=True,
             )
+            stream.appender = stores.FrameAppender(stream.bulk)
         elif frame.shape != stream.frame_shape:
             stream.timestamps.pop()
             raise ZendarFormatError(
                 f"{self.scene_id}: {stream.path}/{name}: expected every frame of shape {list(stream.frame_shape)}, "
                 f"found {list(frame.shape)}"
             )
-        n = stream.bulk.shape[0]
-        stream.bulk.resize((n + 1, *frame.shape))
-        stream.bulk[n] = frame
+        stream.appender.append(frame)
         self._store.raise_if_failed()  # disk full: stop now, not after writing the rest into the void
         stream.bulk_crc32c.append(checksums.crc32c(frame))  # the frame is the chunk
 
@@ -267,15 +270,31 @@ class SceneWriter:
         dj_ecef: Any,
         aperture_ns: Any,
         ego_stopped: bool | None = None,
+        *,
+        magnitude_only: bool = False,
     ) -> None:
         """Append a SAR image ``[H, W]`` complex64; pixel (i, j) is at origin + i·di + j·dj (ECEF, m).
 
         ``aperture_ns`` is the (start, end) GPS time of the synthetic aperture. ``ego_stopped``
         (optional, docs/format.md): whether the ego stood still at some moment of the aperture;
-        given for every frame of the stream or for none.
+        given for every frame of the stream or for none. ``magnitude_only``: the image holds real
+        magnitudes (uint32 or float32), stored exactly as given; the stream's group then gets
+        ``magnitude_only: true`` (docs/format.md). Every frame of a stream has the same dtype.
         """
         stream = self._stream("sar", sensor, RadarCalibration)
         where = f"{self.scene_id}: {stream.path}"
+        image = np.asarray(image)
+        if magnitude_only and image.dtype not in SAR_MAGNITUDE_DTYPES:
+            raise ZendarFormatError(
+                f"{where}/image: expected real magnitudes ({' or '.join(d.name for d in SAR_MAGNITUDE_DTYPES)}) "
+                f"for a magnitude-only image, found {image.dtype.name}"
+            )
+        image = _as(image, image.dtype.name if magnitude_only else "complex64", (None, None), f"{where}/image")
+        if stream.bulk is not None and np.dtype(stream.bulk.dtype) != image.dtype:
+            raise ZendarFormatError(
+                f"{where}/image: expected every frame of the stream as {np.dtype(stream.bulk.dtype).name} "
+                f"(magnitude_only={np.dtype(stream.bulk.dtype) in SAR_MAGNITUDE_DTYPES}), found {image.dtype.name}"
+            )
         if stream.timestamps and ("ego_stopped" in stream.small) != (ego_stopped is not None):
             raise ZendarFormatError(
                 f"{where}/ego_stopped: expected a value for every frame of the stream or for none, found "
@@ -284,7 +303,6 @@ class SceneWriter:
             )
         if ego_stopped is not None and not isinstance(ego_stopped, (bool, np.bool_)):
             raise ZendarFormatError(f"{where}/ego_stopped: expected a bool, found {ego_stopped!r}")
-        image = _as(image, "complex64", (None, None), f"{where}/image")
         vectors = {
             name: _as(value, "float64", (3,), f"{where}/{name}")
             for name, value in (("origin_ecef", origin_ecef), ("di_ecef", di_ecef), ("dj_ecef", dj_ecef))
@@ -382,6 +400,7 @@ class SceneWriter:
             raise ZendarFormatError(f"{where}/attitude_wxyz: expected unit quaternions, found norm {norms[bad]:.9f} at {bad}")
         for name, array in (("timestamp_ns", timestamps), ("position_ecef", position), ("attitude_wxyz", attitude)):
             self._write_small(f"{TRACKLOG}/{name}", array)
+        self._flush_small()
         self._tracklog_written = True
 
     def write_labels(self, labels: dict[str, np.ndarray]) -> None:
@@ -445,6 +464,7 @@ class SceneWriter:
         for name, array in arrays.items():
             if name != "timestamp_ns":
                 self._write_small(f"{stream.path}/{name}", array)
+        self._flush_small()
 
     def write_camera_index(self, sensor: str, timestamp_ns: Any, frame_index: Any) -> None:
         """Write a whole ``camera_index/<sensor>`` group: [N] int64 times and [N] int64 video frame numbers."""
@@ -456,6 +476,7 @@ class SceneWriter:
         index = _as(frame_index, "int64", (timestamps.shape[0],), f"{where}/frame_index")
         stream.timestamps = timestamps.tolist()
         self._write_small(f"{stream.path}/frame_index", index)
+        self._flush_small()
 
     def write_extra_array(self, path: str, array: np.ndarray) -> None:
         """Write an array that format v1 lists as optional inside an existing stream group
@@ -468,6 +489,7 @@ class SceneWriter:
                 f"{self.scene_id}/{path}: expected an array of rows with non-empty trailing axes, got shape {array.shape}"
             )
         self._write_small(path, np.ascontiguousarray(array))
+        self._flush_small()
 
     def write_attrs(self, path: str, attrs: dict[str, Any]) -> None:
         """Add JSON attributes to the scene root (``""``) or one of its groups (readers ignore unknown ones)."""
@@ -477,20 +499,18 @@ class SceneWriter:
         stores.write_attrs(root.require_group(path) if path else root, attrs)
 
     def _write_small(self, path: str, array: np.ndarray) -> None:
+        """Queue a whole small array (with its chunk checksums) for :meth:`_flush_small` (zarr)."""
         rows = max(1, min(array.shape[0], SMALL_CHUNK_ROWS))
         chunks = (rows, *array.shape[1:])
-        target = stores.create_array(
-            self._store.root,
-            path,
-            shape=array.shape,
-            dtype=array.dtype,
-            chunks=chunks,
-            kind=stores.SMALL,
-            resizable=False,
-        )
-        if array.size:
-            target[...] = array
-        stores.write_attrs(target, {checksums.ARRAY_ATTR: checksums.encode(checksums.block_checksums(array, chunks))})
+        crc32c = checksums.encode(checksums.block_checksums(array, chunks))
+        self._pending_small.append(stores.NewArray(path, array, chunks, stores.SMALL, {checksums.ARRAY_ATTR: crc32c}))
+        if self.backend != "zarr":
+            self._flush_small()  # HDF5 gains nothing from a batch: keep its file's order of writes
+
+    def _flush_small(self) -> None:
+        """Write the queued small arrays together (one pass through zarr's event loop, not one per array)."""
+        pending, self._pending_small = self._pending_small, []
+        stores.write_arrays(self._store.root, pending)
 
     # -- finishing -----------------------------------------------------------
     def _first_sar_timestamps(self) -> np.ndarray | None:
@@ -507,8 +527,12 @@ class SceneWriter:
             if stream.path.startswith("lidar/"):
                 self._flush_points(stream, final=True)
                 self._write_small(f"{stream.path}/offsets", np.asarray(stream.offsets, dtype=np.int64))
+            if stream.appender is not None:
+                stream.appender.finish()
             if stream.bulk is not None:
                 stores.write_attrs(stream.bulk, {checksums.ARRAY_ATTR: checksums.encode(stream.bulk_crc32c)})
+                if stream.path.startswith("sar/") and np.dtype(stream.bulk.dtype) in SAR_MAGNITUDE_DTYPES:
+                    stores.write_attrs(self._store.root.require_group(stream.path), {SAR_MAGNITUDE_ONLY_ATTR: True})
         if self._labels is not None:
             sar_timestamps = self._first_sar_timestamps()
             label_timestamps = self._labels["timestamp_ns"]
@@ -521,6 +545,7 @@ class SceneWriter:
                     )
             for name, array in self._labels.items():
                 self._write_small(f"{LABELS}/{name}", array)
+        self._flush_small()
 
     def close(self) -> None:
         """Finalise the store and rename it to its final path (no-op when already closed)."""

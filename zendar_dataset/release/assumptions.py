@@ -1,7 +1,7 @@
 """What the importer assumes about the release, and the words the summary says it in.
 
 The release states neither its sensors' extrinsics, nor which radar serial is
-which side, nor (without a ``RangeDopplerImageModel``) the radar numbers format v1
+which side (decided and checked in ``release/sides.py``), nor (without a ``RangeDopplerImageModel``) the radar numbers format v1
 requires; its axis conventions differ from format v1's.  Each constant and
 decision the importer takes in their place lives here, with the sentence it
 records in the import summary and in the scene's root attribute
@@ -11,11 +11,11 @@ append their sentences to ``assumed``; the others return the sentence.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 
 import numpy as np
 
-from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
+from zendar_dataset.geometry import ecef_to_geodetic
 from zendar_dataset.release import records as rec
 
 SPEED_OF_LIGHT_MPS = 299_792_458.0
@@ -44,56 +44,6 @@ def sensor_entry(name: str, assumed: list[str]) -> dict:
     entry = {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [0.0, 0.0, 0.0]}
     assumed.append(f"sensor {name!r} pose in the ego frame: identity (no extrinsics in the release)")
     return entry
-
-
-def infer_sides(frames: Mapping[str, Iterable[rec.SarFrame]], assumed: list[str]) -> dict[str, str]:
-    """Serial -> "left"/"right" from where each radar's images lie relative to the vehicle.
-
-    The image centre, moved into the vehicle (IMU: forward, right, down) frame with the
-    image's own pose, has y > 0 on the right.  Named sides are used only when exactly one
-    serial falls on each side.
-
-    Parameters
-    ----------
-    frames
-        Each radar serial's SAR frames in file order; at most the first 20 usable ones are read.
-    assumed
-        Where the decision and its evidence are recorded.
-
-    Returns
-    -------
-    dict
-        Serial -> side, or empty when the sides cannot be told apart.
-    """
-    sides: dict[str, str] = {}
-    evidence = {}
-    for serial, serial_frames in frames.items():
-        right = []
-        for frame in serial_frames:
-            centre = frame.origin_ecef + frame.rows / 2 * frame.di_ecef + frame.cols / 2 * frame.dj_ecef
-            q = frame.attitude_wxyz
-            if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(q)) and np.all(np.isfinite(frame.position_ecef))):
-                continue
-            offset_imu = quat_wxyz_to_matrix(q / np.linalg.norm(q)).T @ (centre - frame.position_ecef)
-            right.append(offset_imu[1])
-            if len(right) >= 20:
-                break
-        if right:
-            lateral = float(np.median(right))
-            sides[serial] = "right" if lateral > 0 else "left"
-            evidence[serial] = lateral
-    named = sorted(sides.values())
-    if len(sides) != len(frames) or len(set(named)) != len(named):
-        assumed.append(
-            f"serial -> side: not inferable (lateral image offsets {evidence}); radars keep their serials as names"
-        )
-        return {}
-    for serial, side in sorted(sides.items()):
-        assumed.append(
-            f"serial {serial} -> {side!r}: inferred from its SAR images lying {abs(evidence[serial]):.1f} m to the "
-            f"{side} of the vehicle (median over the first frames); not stated by the release"
-        )
-    return sides
 
 
 def enu_origin(tracklog_position_ecef: np.ndarray | None, sar_frames: Iterable[rec.SarFrame], assumed: list[str]) -> dict:

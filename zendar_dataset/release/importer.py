@@ -17,7 +17,7 @@ import json
 import os
 import pathlib
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
+from zendar_dataset.release import sides as side_evidence
 from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
 from zendar_dataset.release.discover import SceneSource, find_scenes, fingerprint
 from zendar_dataset.release.pixel_order import vote_pixel_order
@@ -120,6 +121,29 @@ class _SceneImport:
         self.summary = SceneSummary(source.scene_id, str(source.folder), fingerprint=digest)
         self.opened = [open_stream(path, src, skip_corrupt, problems) for path in source.files]
         self.summary.streams = [o.summary for o in self.opened]
+        self.sides: dict[str, str] = {}
+        # Each lidar's (time, ECEF points) decoded so far for the pixel-order checks, shared by every radar.
+        self._lidar_probes: dict[pathlib.Path, tuple[list[tuple[float, np.ndarray]], Iterator[tuple[float, np.ndarray]]]] = {}
+
+    def radar_serials(self) -> set[str]:
+        """The serials its SAR and detection files name."""
+        return set(self._keyed(self._by_kind("Image"), "_images", report=False)) | set(
+            self._keyed(self._by_kind("TrackerState"), "_points", report=False)
+        )
+
+    def decide_sides(self, stated: Mapping[str, str]) -> None:
+        """Serial -> side (``release/sides.py``), decided for every scene before any is written.
+
+        Raises :class:`ZendarFormatError` when the image attitude and the path driven disagree.
+        """
+        images = self._keyed(self._by_kind("Image"), "_images", report=False)
+        points = self._keyed(self._by_kind("TrackerState"), "_points", report=False)
+        tracklogs = self._by_kind("Position")
+        path = side_evidence.tracklog_path(tracklogs[0]) if tracklogs else None
+        if path is None:
+            path = side_evidence.frames_path(itertools.chain.from_iterable(_sar_frames(o, probe=True) for o in images.values()))
+        evidence = side_evidence.gather_evidence(images, points, path, lambda opened: _sar_frames(opened, probe=True))
+        self.sides = side_evidence.decide_sides(self.source.scene_id, evidence, stated, self.summary.assumptions)
 
     def _by_kind(self, name: str) -> list[OpenedStream]:
         return [o for o in self.opened if o.stream is not None and o.stream.kind.name == name and o.stream.kind.converted]
@@ -130,10 +154,9 @@ class _SceneImport:
         images = self._keyed(self._by_kind("Image"), "_images")
         points = self._keyed(self._by_kind("TrackerState"), "_points")
         rd_frames = self._keyed(self._by_kind("RangeDopplerFrame"), "_rd")
-        sides = assume.infer_sides({serial: _sar_frames(o, probe=True) for serial, o in images.items()}, scene.assumptions)
 
         def rename(serial: str) -> str:
-            return sides.get(serial, serial)
+            return self.sides.get(serial, serial)
 
         models = self._models(list(rd_frames))
         assumed_models = set()
@@ -183,8 +206,9 @@ class _SceneImport:
                 },
             )
 
-    def _keyed(self, opened: list[OpenedStream], suffix: str, camera: bool = False) -> dict[str, OpenedStream]:
-        """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name.
+    def _keyed(self, opened: list[OpenedStream], suffix: str, camera: bool = False, report: bool = True) -> dict[str, OpenedStream]:
+        """Streams keyed by sensor name: the file-name prefix before ``suffix``, else the parent folder's name
+        (a second stream for a name is skipped, and said so in its summary when ``report``).
 
         Cameras are named after their folders (``camera/left/index.pbs`` -> ``camera_left``), always starting
         with ``camera`` so that no camera takes a radar's name in the scene's shared sensor names.
@@ -203,7 +227,8 @@ class _SceneImport:
                 name = folders if stem == "stream" and folders else stem
             name = re.sub(r"[^A-Za-z0-9_-]+", "_", name)
             if name in out:
-                item.summary.skipped.append(f"a second stream for sensor {name!r}; {out[name].summary.path} was used")
+                if report:
+                    item.summary.skipped.append(f"a second stream for sensor {name!r}; {out[name].summary.path} was used")
                 continue
             out[name] = item
         return out
@@ -247,7 +272,7 @@ class _SceneImport:
             if source.stream.kind.name == "TrackerState":
                 known = ((d.timestamp_s, d.columns["position_ecef"]) for d in decoded_records(source, rec.detections, probe=True))
             else:
-                known = ((s.timestamp_s, s.position_ecef) for s in decoded_records(source, rec.lidar_sweep, probe=True))
+                known = self._lidar_probe(source, last_s)
             for probe in known:
                 if probe[0] > last_s:
                     break
@@ -257,14 +282,28 @@ class _SceneImport:
                 break
         return assume.pixel_order(name, i_fastest, evidence, self.summary.assumptions)
 
+    def _lidar_probe(self, lidar: OpenedStream, last_s: float) -> list[tuple[float, np.ndarray]]:
+        """The lidar's (time, ECEF points) in file order up to the first sweep after ``last_s``, decoded once
+        for all radars (the sweeps are the bulk of a scene's bytes)."""
+        if lidar.path not in self._lidar_probes:
+            sweeps = ((s.timestamp_s, s.position_ecef) for s in decoded_records(lidar, rec.lidar_sweep, probe=True))
+            self._lidar_probes[lidar.path] = ([], sweeps)
+        seen, rest = self._lidar_probes[lidar.path]
+        while not seen or seen[-1][0] <= last_s:
+            sweep = next(rest, None)
+            if sweep is None:
+                break
+            seen.append(sweep)
+        return seen
+
     def _write_sar(self, out, name: str, serial: str, opened: OpenedStream, i_fastest: bool) -> None:
         stamps = _Stamps(opened.summary)
-        holds_seen = set()
+        layout = None  # (holds, dtype) of the stream's first frame: format v1 keeps one image dtype per stream
         bad: dict[str, int] = {}
         shape = None
         for frame in _sar_frames(opened):
             try:
-                image, holds = rec.sar_pixels(frame, i_fastest)
+                image, holds = rec.sar_grid(frame, i_fastest)
             except ValueError as exc:
                 bad[str(exc)] = bad.get(str(exc), 0) + 1
                 continue
@@ -276,18 +315,23 @@ class _SceneImport:
                 why = f"shape {list(image.shape)} differs from the stream's first {list(shape)}"
                 bad[why] = bad.get(why, 0) + 1
                 continue
+            if layout is not None and (holds, image.dtype) != layout:
+                why = f"{holds} pixels ({image.dtype.name}) differ from the stream's first frame's {layout[0]} ({layout[1].name})"
+                bad[why] = bad.get(why, 0) + 1
+                continue
             ns = stamps.take(frame.timestamp_s)
             if ns is None:
                 continue
-            shape = image.shape
-            out.append_sar(name, ns, image, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, [ns, ns])
-            holds_seen.add(holds)
+            shape, layout = image.shape, (holds, image.dtype)
+            out.append_sar(
+                name, ns, image, frame.origin_ecef, frame.di_ecef, frame.dj_ecef, [ns, ns], magnitude_only=holds == "magnitude"
+            )
         stamps.report()
         opened.summary.skipped.extend(f"{n} frames: {why}" for why, n in bad.items())
-        if not holds_seen:
+        if layout is None:
             return
         opened.summary.written_to = f"sar/{name}"
-        magnitude_only = holds_seen == {"magnitude"}
+        magnitude_only = layout[0] == "magnitude"
         out.write_attrs(f"sar/{name}", {"magnitude_only": magnitude_only, "serial": serial, "aperture_known": False})
         self.summary.assumptions += assume.sar_pixels_and_aperture(name, magnitude_only)
 
@@ -408,6 +452,22 @@ def _imported_from(scene_path: pathlib.Path) -> dict:
         store.close()
 
 
+def _check_stated_sides(stated: Mapping[str, str], imports: list[_SceneImport], problems: list[str]) -> None:
+    """Every stated side is left or right, given once, to a serial some scene to import holds."""
+    bad = {serial: side for serial, side in stated.items() if side not in side_evidence.SIDES}
+    if bad:
+        problems.append(f"--sides: sides must be left or right, got {bad}")
+    if len(set(stated.values())) != len(stated):
+        problems.append(f"--sides: one side is given to more than one serial ({stated})")
+    known = set().union(*(job.radar_serials() for job in imports)) if imports else set()
+    unknown = sorted(set(stated) - known)
+    if unknown:
+        problems.append(
+            f"--sides: {', '.join(unknown)} is not a radar serial of the scenes to import "
+            f"(their serials: {', '.join(sorted(known)) or 'none'})"
+        )
+
+
 def import_release(
     src: str | os.PathLike,
     out: str | os.PathLike,
@@ -416,6 +476,7 @@ def import_release(
     split: str = "train",
     skip_corrupt: bool = False,
     backend: str = "zarr",
+    sides: Mapping[str, str] | None = None,
     log: Callable[[str], None] | None = None,
 ) -> ImportSummary:
     """Convert every scene of a release folder into a format-v1 dataset at ``out``.
@@ -435,13 +496,17 @@ def import_release(
         Skip truncated and corrupt stretches of streams (reported) instead of stopping.
     backend
         ``"zarr"`` or ``"hdf5"``.
+    sides
+        Radar serial -> ``"left"`` or ``"right"``, stated by the user (``--sides``): taken instead of
+        deciding (``release/sides.py``); in a scene where it names some radars, the others keep their serials.
     log
         Called with each scene id as it starts.
 
     Raises
     ------
     ZendarError
-        A problem with the source (every unreadable stream listed) or the arguments.
+        A problem with the source (every unreadable stream listed, and every scene whose image attitude
+        and path driven disagree on left and right) or the arguments.
     """
     src_path, out_path = pathlib.Path(src), pathlib.Path(out)
     if not src_path.exists():
@@ -481,6 +546,14 @@ def import_release(
                 summary.scenes.append(done)
                 continue
             imports.append(_SceneImport(source, base, skip_corrupt, problems, digest))
+        stated = dict(sides or {})
+        _check_stated_sides(stated, imports, problems)
+        if not problems:
+            for job in imports:
+                try:
+                    job.decide_sides(stated)
+                except ZendarFormatError as exc:
+                    problems.extend(exc.problems)
         if problems:
             raise ZendarFormatError(f"{src_path}: {len(problems)} problems: " + "; ".join(problems), problems)
         for job in imports:

@@ -142,6 +142,16 @@ def sar_flat(frame: SarFrame) -> tuple[np.ndarray, str]:
     return np.frombuffer(frame.data, "<f4" if frame.pixel_type == REAL_32F else "<u4"), "magnitude"
 
 
+def sar_grid(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str]:
+    """The image ``[rows, cols]`` in its recorded element type (``<u4``, ``<f4`` or ``<c8``), element
+    [i, j] = pixel (i, j), and what it holds (``"complex"`` or ``"magnitude"``); see :func:`sar_pixels`.
+
+    A view of the record's buffer (transposed when ``i_fastest``): nothing is copied or converted.
+    """
+    flat, holds = sar_flat(frame)
+    return (flat.reshape(frame.cols, frame.rows).T if i_fastest else flat.reshape(frame.rows, frame.cols)), holds
+
+
 def sar_pixels(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str]:
     """The image ``[rows, cols]`` complex64 with element [i, j] = pixel (i, j), and what it holds.
 
@@ -167,8 +177,7 @@ def sar_pixels(frame: SarFrame, i_fastest: bool = True) -> tuple[np.ndarray, str
     ValueError
         When the buffer size is not 4 or 8 bytes per pixel.
     """
-    flat, holds = sar_flat(frame)
-    grid = flat.reshape(frame.cols, frame.rows).T if i_fastest else flat.reshape(frame.rows, frame.cols)
+    grid, holds = sar_grid(frame, i_fastest)
     return grid.astype(np.complex64), holds
 
 

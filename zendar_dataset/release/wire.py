@@ -427,8 +427,11 @@ def _records(data: np.ndarray, offsets: np.ndarray, size: int, columns: list[Col
     if offsets.size == 1 or (np.all(steps == steps[0]) and steps[0] >= size):
         step = int(steps[0]) if offsets.size > 1 else size
         return np.ndarray((offsets.size,), dtype, buffer=data, offset=int(offsets[0]), strides=(step,)), runs
-    gathered = np.ascontiguousarray(data[offsets[:, None] + np.arange(size)[None, :]])
-    return gathered.view(dtype).reshape(-1), runs
+    # Every byte position as the start of an opaque V<size> element (a view, nothing copied): indexing
+    # it copies each chosen element whole (a structured dtype would be copied field by field, and a
+    # byte-wise gather needs an index per byte).
+    starts = np.ndarray((data.size - size + 1,), f"V{size}", buffer=data, offset=0, strides=(1,))
+    return starts[offsets].view(dtype), runs
 
 
 def _record_values(records: np.ndarray, column: Column) -> tuple[np.ndarray, np.ndarray]:

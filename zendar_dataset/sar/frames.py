@@ -1,8 +1,10 @@
 """The SAR images of one scene as stored by the format, and where ECEF points fall in them.
 
-A stored SAR frame is a magnitude (or complex) image ``sar/<sensor>/image`` ``[N, H, W]`` on a plane
+A stored SAR frame is a complex (or magnitude) image ``sar/<sensor>/image`` ``[N, H, W]`` on a plane
 grid given per frame by ``origin_ecef`` (the centre of pixel ``(0, 0)``) and the steps ``di_ecef``,
-``dj_ecef`` (metres per pixel along rows and columns), all ECEF (docs/format.md).
+``dj_ecef`` (metres per pixel along rows and columns), all ECEF (docs/format.md). A magnitude-only
+stream (``magnitude_only``) stores real uint32/float32 magnitudes, exact: everything here that uses
+magnitudes reads them alike; :meth:`SarFrames.complex_image`, which needs phase, refuses them.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.reader import SceneReader
 
 # The SAR value of a point is the brightest pixel within this distance of its projection
@@ -46,7 +49,8 @@ class SarFrames:
         ``[N, 3]`` float64 ECEF metres per sensor: pixel ``(0, 0)``'s centre and the row and
         column steps.
     images : dict of str to array-like
-        ``[N, H, W]`` stored images per sensor (read on access).
+        ``[N, H, W]`` stored images per sensor (read on access): complex64, or the real magnitudes of a
+        magnitude-only sensor.
     """
 
     def __init__(self, reader: SceneReader, keep_frames: int | None = CACHED_FRAMES_PER_SENSOR) -> None:
@@ -56,6 +60,7 @@ class SarFrames:
         self.di = {s: reader.array(f"sar/{s}/di_ecef")[...] for s in self.sensors}
         self.dj = {s: reader.array(f"sar/{s}/dj_ecef")[...] for s in self.sensors}
         self.images = {s: reader.array(f"sar/{s}/image") for s in self.sensors}
+        self._reader = reader
         self._cache: OrderedDict[tuple[str, int], tuple[np.ndarray, float]] = OrderedDict()
         if keep_frames is not None and not (isinstance(keep_frames, int) and keep_frames >= 1):
             raise ValueError(f"SarFrames: keep_frames must be None or a positive integer, got {keep_frames!r}")
@@ -74,7 +79,8 @@ class SarFrames:
         Returns
         -------
         magnitude : numpy.ndarray
-            ``[H, W]`` ``|pixel|`` (float32 for a complex64 image).
+            ``[H, W]`` ``|pixel|`` (float32 for a complex64 image; the stored uint32 or float32
+            magnitudes, exact, of a magnitude-only one).
         floor : float
             The median of the non-zero magnitudes (1.0 for an all-zero image), the dB reference.
         """
@@ -88,6 +94,21 @@ class SarFrames:
             if self._keep is not None and len(self._cache) > self._keep:
                 self._cache.popitem(last=False)
         return self._cache[key]
+
+    def complex_image(self, sensor: str, frame: int) -> np.ndarray:
+        """One image ``[H, W]`` complex64, phase included.
+
+        Raises
+        ------
+        ZendarFormatError
+            For a magnitude-only sensor (either layout): its recording holds no phase.
+        """
+        if self._reader.sar_magnitude_only(sensor):
+            raise ZendarFormatError(
+                f"{self._reader.scene_id}: sar/{sensor}/image: expected complex pixels (phase), found magnitudes "
+                "only (attribute magnitude_only: the recording holds no phase); use magnitude() or image_db()"
+            )
+        return np.asarray(self.images[sensor][frame], dtype=np.complex64)
 
     def image_db(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
         """One image in dB over its median non-zero magnitude.
