@@ -44,6 +44,14 @@ def ground_truth(n_scenes: int = 4, frames_per_scene: int = 5, seed: int = 0) ->
     return {"frames": frames, "split": "test"}
 
 
+
+def ground_truth_file(directory: Path, **kwargs) -> tuple[dict, Path]:
+    """:func:`ground_truth` (``kwargs`` passed on) and ``directory / "gt.json"`` holding it."""
+    gt = ground_truth(**kwargs)
+    path = directory / "gt.json"
+    path.write_text(json.dumps(gt))
+    return gt, path
+
 def meta(**overrides) -> dict:
     """A complete, valid ``meta``."""
     value = {

@@ -12,7 +12,7 @@ import subprocess
 import pytest
 
 from tests.leaderboard.chromium import chromium
-from tests.leaderboard.conftest import ground_truth, start_server, submission
+from tests.leaderboard.conftest import ground_truth_file, start_server, submission
 from tests.leaderboard.helpers import expected_ap
 from zendar_leaderboard.ground_truth import divide_frames
 from zendar_leaderboard.scoring import format_ap_percent
@@ -30,9 +30,7 @@ def test_upload_form_to_ranking_in_chromium(tmp_path, browser):
     from selenium.webdriver.support import expected_conditions as until
     from selenium.webdriver.support.ui import WebDriverWait
 
-    gt = ground_truth()
-    gt_path = tmp_path / "gt.json"
-    gt_path.write_text(json.dumps(gt))
+    gt, gt_path = ground_truth_file(tmp_path)
     db = tmp_path / "board.db"
     store = Store(db)
     token = store.add_team("Radar <Lab>")

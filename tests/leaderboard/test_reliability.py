@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import sqlite3
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from tests.leaderboard.conftest import ground_truth, start_server, submission
+from tests.leaderboard.conftest import ground_truth_file, start_server, submission
 from tests.leaderboard.helpers import expected_ap, post_submission, wait_done
 from zendar_leaderboard.ground_truth import divide_frames
 from zendar_leaderboard.store import Store
@@ -17,9 +16,7 @@ from zendar_leaderboard.store import Store
 
 @pytest.mark.slow
 def test_fifty_concurrent_submissions_from_fifty_teams_are_each_recorded_and_scored_once(tmp_path):
-    gt = ground_truth()
-    gt_path = tmp_path / "gt.json"
-    gt_path.write_text(json.dumps(gt))
+    gt, gt_path = ground_truth_file(tmp_path)
     db = tmp_path / "board.db"
     store = Store(db)
     tokens = [store.add_team(f"team-{k:02d}") for k in range(50)]
@@ -48,9 +45,7 @@ def test_fifty_concurrent_submissions_from_fifty_teams_are_each_recorded_and_sco
 
 @pytest.mark.slow
 def test_a_server_killed_while_scoring_loses_nothing_and_scores_the_rest_on_restart(tmp_path):
-    gt = ground_truth(n_scenes=8, frames_per_scene=10)
-    gt_path = tmp_path / "gt.json"
-    gt_path.write_text(json.dumps(gt))
+    gt, gt_path = ground_truth_file(tmp_path, n_scenes=8, frames_per_scene=10)
     db = tmp_path / "board.db"
     store = Store(db)
     tokens = [store.add_team(f"crash-{k}") for k in range(4)]

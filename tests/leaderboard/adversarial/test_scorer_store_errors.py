@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from tests.leaderboard.conftest import InProcessServer, ground_truth, submission
+from tests.leaderboard.conftest import InProcessServer, ground_truth, ground_truth_file, submission
 from tests.leaderboard.helpers import post_submission, request, wait_done
 from zendar_leaderboard import scheduler, store as store_module
 from zendar_leaderboard.ground_truth import load_test_split
@@ -82,9 +82,7 @@ def quota_one_board(tmp_path, quick_retries):
 def test_a_write_lock_held_past_the_busy_timeout_delays_scoring_but_does_not_stop_it(tmp_path, monkeypatch, caplog,
                                                                                        quick_retries):
     monkeypatch.setattr(store_module, "BUSY_TIMEOUT_S", 0.2)
-    gt = ground_truth()
-    gt_path = tmp_path / "gt.json"
-    gt_path.write_text(json.dumps(gt))
+    gt, gt_path = ground_truth_file(tmp_path)
     test_split = load_test_split(gt_path)
     store = Store(tmp_path / "board.db")
     team = store.team_for_token(store.add_team("patient"))

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from tests.leaderboard.conftest import ground_truth, meta, start_server, submission
+from tests.leaderboard.conftest import ground_truth, ground_truth_file, meta, start_server, submission
 from tests.leaderboard.helpers import post_submission, wait_done
 from zendar_leaderboard.store import Store
 
@@ -35,9 +35,7 @@ def interruptions(db, submission_id: int) -> int:
 
 @pytest.mark.slow
 def test_second_serves_on_a_database_being_served_exit_2_and_leave_its_scoring_alone(tmp_path):
-    gt = ground_truth(n_scenes=8, frames_per_scene=10)
-    gt_path = tmp_path / "gt.json"
-    gt_path.write_text(json.dumps(gt))
+    gt, gt_path = ground_truth_file(tmp_path, n_scenes=8, frames_per_scene=10)
     db = tmp_path / "board.db"
     store = Store(db)
     token = store.add_team("first come")
