@@ -11,7 +11,10 @@ References, in the same run and interleaved call by call:
 * strawman (labelled): a per-reference-time Python loop of ``np.searchsorted``.
 
 The package figures include building its per-stream ``StreamTimes`` (which validates every
-timestamp: sorted, unique, int64), as the Dataset does per scene, and then without it.
+timestamp: sorted, unique, int64), as the Dataset does per scene, with the default tolerances
+(half a median interval: the medians are computed, which the plain code is spared) and with the
+tolerances given as the plain code gets them; and without building them (the medians then kept
+from an earlier call).
 Single-threaded on both sides. Times: min / median / max over ``--repeats`` calls.
 
 Run: python benchmarks/bench_sync.py [--repeats 15]
@@ -87,6 +90,12 @@ def main() -> None:
         checked = [StreamTimes(s.name, s.timestamp_ns, s.window) for s in streams]
         return build_sync_table(StreamTimes(reference.name, reference.timestamp_ns), checked)
 
+    given_ms = {name: tolerance / 1e6 for name, tolerance in table.tolerance_ns.items()}
+
+    def validate_and_build_given():
+        checked = [StreamTimes(s.name, s.timestamp_ns, s.window) for s in streams]
+        return build_sync_table(StreamTimes(reference.name, reference.timestamp_ns), checked, tolerance_ms=given_ms)
+
     def plain():
         return {
             s.name: (plain_latest(ref_ns, s.timestamp_ns, s.window, table.tolerance_ns[s.name]) if s.window
@@ -99,7 +108,8 @@ def main() -> None:
         if not np.array_equal(same[s.name][table.reference_index], table.element[s.name]):
             raise AssertionError(f"plain searchsorted and the package disagree on {s.name}")
     times = interleaved(
-        {"validate": validate_and_build, "build": lambda: build_sync_table(reference, streams), "plain": plain},
+        {"validate": validate_and_build, "given": validate_and_build_given,
+         "build": lambda: build_sync_table(reference, streams), "plain": plain},
         args.repeats,
     )
     nearest = [s for s in streams if not s.window]
@@ -114,6 +124,7 @@ def main() -> None:
     base = times["validate"].median
     for label, spread in (
         ("package: validate + build_sync_table (7 streams)", times["validate"]),
+        ("package: validate + build, tolerances given (the plain's inputs)", times["given"]),
         ("package: build_sync_table only (StreamTimes already built)", times["build"]),
         ("plain numpy: one searchsorted per stream (6 streams)", times["plain"]),
         ("strawman: Python loop of searchsorted (4 nearest streams)", straw),

@@ -94,26 +94,44 @@ def median_interval_ns(timestamp_ns: np.ndarray) -> int | None:
     return int(_median_consuming(np.diff(timestamp_ns)))
 
 
+# Jittered intervals: one value in this many is sampled to bracket the middle ranks.
+_BRACKET_SAMPLE_STEP = 64
+
+
 def _median_consuming(values: np.ndarray) -> float:
     """``np.median`` of a 1-D integer array that the caller gives up (it is reordered or shifted in place).
 
-    Working in place saves the copies ``np.median`` makes, and fresh arrays are costly
-    here (page faults on every new megabyte). A fixed-rate clock (the 100 Hz tracklog)
-    gives intervals of a few distinct values, on which a partition is slow: values that
-    span less than their count are counted instead (an hour of the tracklog: 0.7 against
-    4.6 ms, the largest part of building the index, benchmarks/bench_sync.py).
+    The default tolerances need every stream's median interval, which ``np.median``'s
+    partition of the whole array made the largest part of building the index
+    (benchmarks/bench_sync.py). Exact whatever the data:
+
+    - values that span less than their count (a fixed-rate clock such as the 100 Hz
+      tracklog, a few distinct intervals, on which a partition is slowest) are counted;
+    - otherwise (capture jitter) two quantiles of a 1-in-64 sample bracket the middle
+      ranks, which are selected among the bracketed values only (about a fifth);
+    - when the bracket misses them, the whole array is partitioned in place.
     """
     n = values.size
     if n == 0:
         return float(np.median(values))
     smallest, largest = int(values.min()), int(values.max())
-    if largest - smallest >= n:
-        return float(np.median(values, overwrite_input=True))
-    values -= smallest
-    cumulative = np.cumsum(np.bincount(values))
-    lower, upper = np.searchsorted(cumulative, [(n - 1) // 2, n // 2], side="right")
+    middle = [(n - 1) // 2, n // 2]
+    if largest - smallest < n:
+        values -= smallest
+        lower, upper = np.searchsorted(np.cumsum(np.bincount(values)), middle, side="right")
+        picked = [smallest + int(lower), smallest + int(upper)]
+    else:
+        sample = np.sort(values[::_BRACKET_SAMPLE_STEP])
+        low, high = sample[(4 * sample.size) // 10], sample[(6 * sample.size) // 10]
+        below = int(np.count_nonzero(values < low))
+        inside = values[(values >= low) & (values <= high)]
+        ranks = [rank - below for rank in middle]
+        if ranks[0] < 0 or ranks[1] >= inside.size:
+            inside, ranks = values, middle
+        inside.partition(ranks)
+        picked = [int(inside[rank]) for rank in ranks]
     # As np.median: the mean of the two middle values in float64 (one value when n is odd).
-    return (float(smallest + int(lower)) + float(smallest + int(upper))) / 2
+    return (float(picked[0]) + float(picked[1])) / 2
 
 
 def resolve_tolerances_ns(
