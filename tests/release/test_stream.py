@@ -52,6 +52,9 @@ def test_zero_length_records_are_empty_messages_not_framing_errors(tmp_path):
         assert stream.framing.header_bytes == 0
         assert [r["frame_id"] for r in stream] == [0, 1]
         assert stream.empty_records == 1
+        # Read again (the import's probes read a stream more than once): still one empty record.
+        assert len(list(stream.records())) == 2 and len(stream.spans()[0]) == 2
+        assert stream.empty_records == 1
 
 
 def test_headerless_file_starting_with_two_empty_records_is_read_as_header(tmp_path):

@@ -259,8 +259,6 @@ class ReleaseStream:
         The message kind and generation found.
     losses : list of Loss
         What ``skip_corrupt`` skipped.
-    empty_records : int
-        Records of length 0 (empty messages; not yielded).
     unknown_fields : dict
         ``"<Message>.<number>"`` -> occurrences of fields the kind's definition lacks, skipped while
         decoding (the kind is decided by strict sniffing first).
@@ -279,7 +277,6 @@ class ReleaseStream:
         self.skip_corrupt = skip_corrupt
         self.losses: list[Loss] = []
         self.notes: list[str] = []
-        self.empty_records = 0
         self.unknown_fields: dict[str, int] = {}
         candidates = kinds_named(kind)
         try:
@@ -397,10 +394,13 @@ class ReleaseStream:
         ``offset`` is the byte offset of the record's length prefix.
         """
         for offset, length in zip(self._offsets, self._lengths):
-            if length == 0:
-                self.empty_records += 1
-                continue
-            yield offset - 4, self._data, offset, offset + length
+            if length:
+                yield offset - 4, self._data, offset, offset + length
+
+    @property
+    def empty_records(self) -> int:
+        """Records of length 0 in the stream (counted once, however often it is read)."""
+        return int(np.count_nonzero(np.asarray(self._lengths, np.int64) == 0))
 
     @property
     def buffer(self) -> memoryview:
@@ -409,11 +409,10 @@ class ReleaseStream:
 
     def spans(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every non-empty record at once: ``[n]`` int64 prefix offsets, payload offsets and payload lengths
-        (for column-wise decoding of streams of many small records; empty records are counted)."""
+        (for column-wise decoding of streams of many small records; :attr:`empty_records` counts the others)."""
         lengths = np.asarray(self._lengths, np.int64)
         offsets = np.asarray(self._offsets, np.int64)
         keep = lengths > 0
-        self.empty_records += int(np.count_nonzero(~keep))
         return offsets[keep] - 4, offsets[keep], lengths[keep]
 
     def __iter__(self) -> Iterator[dict[str, Any]]:
