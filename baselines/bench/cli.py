@@ -1,8 +1,8 @@
 """Command line of ``zendar-bench``.
 
     zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
-                 [--ablations] [--device cpu|cuda] [--native-isa]
-    zendar-bench verify [--out DIR] [--device cpu|cuda] [--native-isa]
+                 [--ablations] [--device cpu|cuda]
+    zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
 
@@ -22,7 +22,6 @@ from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 
 from zendar_baselines.bench.configs import CONFIGS, get_config
-from zendar_baselines.cnn.numerics import NATIVE_ISA_FLAG
 
 DEFAULT_OUT = "zendar-bench-out"
 DEFAULT_CONFIG = "demo"
@@ -40,11 +39,6 @@ RUN_DESCRIPTION = (
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=DEFAULT_OUT, help=f"run directory (default: ./{DEFAULT_OUT})")
     parser.add_argument("--device", default="cpu", choices=DEVICES, help="where the CNNs run (default: cpu)")
-    parser.add_argument(NATIVE_ISA_FLAG, action="store_true",
-                        help="let torch and numpy use the CPU's widest vector code (e.g. AVX-512): faster there, but "
-                        "the CNN numbers then depend on the CPU; by default they are held to their AVX2 paths, the same "
-                        "numbers on every x86-64 CPU with AVX2 (set by the zendar-bench command before numpy and torch "
-                        "load; results.json 'numerics' says which)")
 
 
 def _run_arguments(parser: argparse.ArgumentParser) -> None:

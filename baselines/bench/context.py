@@ -9,7 +9,6 @@ from typing import Any
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 from zendar_baselines.bench.configs import BenchConfig
-from zendar_baselines.cnn.numerics import numerics_mode
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_fingerprint
 from zendar_baselines.labels.splits import SemiSupervisedSplit
@@ -63,10 +62,8 @@ class RunContext:
         return self.run_path / INPUTS_DIR
 
     def step_inputs(self) -> dict[str, Any]:
-        """What every step's cache key starts from: the configuration, the dataset, the code and the numerics
-        (:func:`zendar_baselines.cnn.numerics.numerics_mode`)."""
-        return {"config": self.config.to_json(), "dataset": self.fingerprint, "code_version": self.code_version,
-                "numerics": numerics_mode()}
+        """What every step's cache key starts from: the configuration, the dataset and the code."""
+        return {"config": self.config.to_json(), "dataset": self.fingerprint, "code_version": self.code_version}
 
 
 @dataclass(frozen=True)

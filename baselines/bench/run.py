@@ -294,7 +294,6 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     from zendar_baselines.bench.chain_step import CFAR_STEP, chain_fit_record
     from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
     from zendar_baselines.bench.figures import write_bev_figure, write_loss_curves, write_pr_comparisons
-    from zendar_baselines.cnn.numerics import numerics_mode
 
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
@@ -313,7 +312,6 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
         "seeds": seeds,
         "device": context.device,
         "code_version": context.code_version,
-        "numerics": numerics_mode(),
         "dataset": {"root": str(context.root), "fingerprint": context.fingerprint},
         "rows": [row.to_json() for row in rows],
         "claims": verdicts,

@@ -58,7 +58,6 @@ from zendar_baselines.cnn.checkpoints import (
 from zendar_baselines.code_version import code_version
 from zendar_baselines.cnn.schedule import Schedule
 from zendar_baselines.cnn.mask_frames import MaskFrames
-from zendar_baselines.cnn.numerics import hold_convolutions_to_avx2
 from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING, UNCERTAIN
 
 MAX_POS_WEIGHT = 100.0
@@ -68,9 +67,12 @@ MAX_POS_WEIGHT = 100.0
 #: config's widths two one-thread trainings side by side (``zendar-bench``'s worker processes) finish
 #: sooner than the two one after the other on 2 threads (benchmarks/bench_seed_workers.py).
 TRAINING_THREADS = 1
-# oneDNN picks its convolution kernels, and with them the summation order, by the CPU's vector width;
-# capped at AVX2 an AVX-512 and an AVX2 CPU train to the same weights (zendar_baselines.cnn.numerics).
-hold_convolutions_to_avx2()
+#: The widest vector instructions oneDNN's convolutions may use. oneDNN picks its kernels, and with
+#: them the summation order, by the CPU's vector width: unpinned, an AVX-512 and an AVX2 CPU train to
+#: other weights. AVX2 runs on both. oneDNN reads it once, at the process's first convolution, so it
+#: is set (unless the environment sets it) when this module is imported, before any model runs.
+ONEDNN_MAX_CPU_ISA = "AVX2"
+os.environ.setdefault("ONEDNN_MAX_CPU_ISA", ONEDNN_MAX_CPU_ISA)
 _CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")
 
 
@@ -709,6 +711,7 @@ def predict_masks(
 
 __all__ = [
     "MAX_POS_WEIGHT",
+    "ONEDNN_MAX_CPU_ISA",
     "TRAINING_THREADS",
     "TrainResult",
     "checkpoint_path",

@@ -154,7 +154,7 @@ RULES = {
         lambda root: _calibration(root, lambda s: s["right"].update(rx_positions_m=[[0.0, 0.0, 0.0]] * 3)),
         "s0: radar/right/cube: expected A=3 antennas (rx_positions_m of 'right'), found [4, 16, 8, 4]",
     ),
-    "array-dtype": (_array("sar/left/image", np.zeros((2, 12, 10), np.complex128)), "s0: sar/left/image: expected dtype complex64, found complex128"),
+    "array-dtype": (_array("sar/left/image", np.zeros((2, 12, 10), np.complex128)), "s0: sar/left/image: expected dtype complex64 (or uint32, float32 for a magnitude-only image), found complex128"),
     "array-fixed-size": (_array("sar/right/di_ecef", np.zeros((2, 2))), "s0: sar/right/di_ecef: expected size 3 on axis 1"),
     "stream-length-n": (_array("sar/right/origin_ecef", np.zeros((3, 3))), "s0: sar/right/origin_ecef: expected 2 rows"),
     "sensor-group-has-all-arrays": (_array("sar/left/aperture_ns", None), "s0: sar/left/aperture_ns: expected an array [N, 2] int64, found nothing"),
