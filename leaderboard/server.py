@@ -229,6 +229,11 @@ class Handler(BaseHTTPRequestHandler):
         expired_before = self.head_expired
         parsed = not expired_before and super().parse_request()
         if self.server.head_done(self) and (expired_before or parsed):
+            if expired_before:
+                # The line was cut short and never parsed: set what the answer and its log line read.
+                self.command = None
+                self.request_version = self.protocol_version
+                self.requestline = str(self.raw_requestline, "iso-8859-1").rstrip("\r\n")
             self.close_connection = True
             self.send_error(
                 HTTPStatus.REQUEST_TIMEOUT,
