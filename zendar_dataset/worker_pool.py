@@ -21,6 +21,7 @@ from typing import Any, TypeVar
 Task = TypeVar("Task")
 
 _THREAD_LIMITS = None
+_NO_MORE_TASKS = object()
 
 
 def usable_cpus() -> int:
@@ -75,24 +76,27 @@ def run_in_workers(
         pending = iter(tasks)
         running: dict[Future, Any] = {}
         failure: BaseException | None = None
-        for task in pending:
-            running[executor.submit(function, task)] = task
-            if len(running) == jobs:
+        while True:
+            while failure is None and len(running) < jobs:
+                task = next(pending, _NO_MORE_TASKS)
+                if task is _NO_MORE_TASKS:
+                    break
+                running[executor.submit(function, task)] = task
+            if not running:
                 break
-        while running:
             done, _ = wait(running, return_when=FIRST_COMPLETED)
-            for future in done:
-                task = running.pop(future)
+            finished = [(running.pop(future), future) for future in done]
+            # Every failure in the batch is seen before a new task is handed out: ``done`` is a set,
+            # and a success read before a failure beside it would start a task after the failure.
+            for task, future in finished:
                 error = future.exception()
                 if isinstance(error, BrokenProcessPool):
                     error = worker_died(task)
                 if error is not None:
                     failure = failure or error
-                    continue
-                on_done(task, future.result())
-                task = next(pending, None) if failure is None else None
-                if task is not None:
-                    running[executor.submit(function, task)] = task
+            for task, future in finished:
+                if future.exception() is None:
+                    on_done(task, future.result())
         executor.shutdown(wait=True)
     except BaseException:
         _terminate(executor)
