@@ -1,4 +1,5 @@
-"""``zendar-bench --ablations``: what two of the chain's changes moved, measured as rows beside Table 1.
+"""``zendar-bench --ablations``: what two of the chain's changes moved, and what optional input
+channels add, measured as rows beside Table 1.
 
 - ``sar-reading-alone``: the CFAR row with the SAR test as it was before the range-Doppler SNR was
   subtracted (a point's SAR value is its SAR reading alone, dB over the image median:
@@ -9,6 +10,12 @@
   grown segments: ``MaskParams(manual_targets="cfar-peaks")``), its checkpoints chosen on validation
   masks made the same way; otherwise the row's own training, chain fit and scoring, with the same
   seeds. Reference: that architecture's supervised-only row.
+- ``phase-difference-channels`` and ``static-doppler-channel``: :data:`ABLATION_MODEL` supervised-only
+  with optional channels beside each map's log power (:mod:`zendar_baselines.cnn.input_channels`):
+  the phase between neighbouring antennas (the angle the paper's input drops), or every cell's
+  Doppler-test residual (its radial velocity against a static point's at its azimuth, given the
+  ego's motion). The row's own targets, validation masks, seeds, schedule, chain fit and scoring;
+  only the input changes. Reference: that architecture's supervised-only row.
 
 Each ablation row is scored on the test split as Table 1's rows are and compared with its reference
 by the claims' paired bootstrap (first seeds, the same resamples of the test split's time blocks,
@@ -31,10 +38,20 @@ from zendar_dataset.eval.report import read_metrics
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.results_table import METHOD_NAMES, Row
 from zendar_baselines.bench.run_directory import RunDirectory
+from zendar_baselines.cnn.input_channels import InputChannels
 from zendar_baselines.labels.masks import MaskParams
 
 #: The architecture whose supervised-only row the target ablation retrains (the paper's first CNN row).
 ABLATION_MODEL = "fpn-resnet34"
+#: The input-channel ablations: name -> (channels beside the log power, what the row changes).
+INPUT_CHANNEL_ABLATIONS = {
+    "phase-difference-channels": (
+        InputChannels(phase_differences=True),
+        "input: + cos and sin of the phase between neighbouring antennas (6 channels per map)"),
+    "static-doppler-channel": (
+        InputChannels(static_doppler=True),
+        "input: + the Doppler test's residual of every cell (1 channel per map)"),
+}
 #: Where the ablations' steps live in the run directory.
 ABLATIONS_DIR = "ablations"
 #: What a comparison's interval says, by the paired verdict of ablation − reference.
@@ -66,7 +83,7 @@ def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels
     run, context, labels
         The run's directory, context and training labels.
     keys
-        The run's ``split`` and ``autolabels`` step keys.
+        The run's ``split``, ``autolabels``, ``label_masks`` and ``validation_masks`` step keys.
     seeds
         Seeds of the retrained row (those of Table 1's rows).
     jobs
@@ -119,6 +136,29 @@ def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels
         Row(f"{reference}-{name}", METHOD_NAMES[ABLATION_MODEL], False, True,
             [read_metrics(run.path / step.name / "metrics.json") for step in seed_steps]),
         seed_steps[0].name))
+
+    # Optional input channels, on the supervised-only row: the same targets, seeds and training.
+    channel_steps = {
+        name: [
+            SeedStep(context, run.identity, labels, RowSeed(ABLATION_MODEL, False, seed, channels),
+                     {**base_inputs, "split": keys["split"], "autolabels": keys["autolabels"],
+                      "label_masks": keys["label_masks"], "validation_masks": keys["validation_masks"],
+                      "model": ABLATION_MODEL, "pretrained": False, "seed": seed, "ablation": name,
+                      "inputs": channels.name},
+                     f"{ABLATIONS_DIR}/{name}")
+            for seed in range(seeds)
+        ]
+        for name, (channels, _) in INPUT_CHANNEL_ABLATIONS.items()
+    }
+    every_step = [step for named in channel_steps.values() for step in named]
+    run_seed_steps(run, every_step, seed_jobs(jobs, len(every_step), context.device))
+    for name, (_, change) in INPUT_CHANNEL_ABLATIONS.items():
+        named = channel_steps[name]
+        ablations.append(Ablation(
+            name, change, reference,
+            Row(f"{reference}-{name}", METHOD_NAMES[ABLATION_MODEL], False, True,
+                [read_metrics(run.path / step.name / "metrics.json") for step in named]),
+            named[0].name))
     return ablations
 
 

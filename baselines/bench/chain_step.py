@@ -88,11 +88,14 @@ def write_cnn_chain_fit(run: RunContext, split: SemiSupervisedSplit, checkpoint:
                         step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
     """A CNN row seed's fit, on the peaks of the model in ``checkpoint``, its SAR threshold chosen by the
     detections (:func:`zendar_baselines.classical.chain_fit.fit_on_frames`)."""
-    from zendar_baselines.bench.scoring import CNN_CHAIN, load_model, model_cells_for
+    from zendar_baselines.bench.scoring import CNN_CHAIN, load_model, model_cells_for, model_inputs
+    from zendar_baselines.bench.steps import scene_maps
 
-    model, _ = load_model(checkpoint, run.device)
-    return write_chain_fit(run, split, detector, model_cells_for(model, run.config.window, run.device), CNN_CHAIN, step_dir,
-                           threshold_by="detections")
+    model, architecture = load_model(checkpoint, run.device)
+    channels = model_inputs(architecture)
+    cells_for = model_cells_for(model, run.config.window, run.device,
+                                lambda reader, radar: scene_maps(reader, radar, run.inputs_dir, channels))
+    return write_chain_fit(run, split, detector, cells_for, CNN_CHAIN, step_dir, threshold_by="detections")
 
 
 def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:

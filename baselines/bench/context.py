@@ -9,6 +9,7 @@ from typing import Any
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 from zendar_baselines.bench.configs import BenchConfig
+from zendar_baselines.cnn.input_channels import InputChannels
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_fingerprint
 from zendar_baselines.labels.splits import SemiSupervisedSplit
@@ -91,11 +92,13 @@ class TrainingLabels:
 
 @dataclass(frozen=True)
 class RowSeed:
-    """One seed of one CNN row of Table 1."""
+    """One seed of one CNN row of Table 1 (``inputs``: the optional input channels of an ablation row;
+    the paper's input by default)."""
 
     model_name: str
     pretrained: bool
     seed: int
+    inputs: InputChannels = InputChannels()
 
     @property
     def row_key(self) -> str:

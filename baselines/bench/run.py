@@ -197,7 +197,8 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     if options.ablations:
         from zendar_baselines.bench.ablations import run_ablations
 
-        ablations = run_ablations(run, context, labels, {"split": split_key, "autolabels": auto_key}, options.seeds,
+        ablations = run_ablations(run, context, labels, {"split": split_key, "autolabels": auto_key, "label_masks": masks_key,
+                                                            "validation_masks": validation_key}, options.seeds,
                                   options.jobs)
     return _write_outputs(context, options.seeds, rows, quality, time.monotonic() - started, split, ablations)
 

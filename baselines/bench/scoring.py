@@ -7,7 +7,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,7 @@ from zendar_dataset.sar.frames import SarFrames
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.classical import cfar_baseline
 from zendar_baselines.classical.chain_fit import CellsFor
+from zendar_baselines.cnn.input_channels import InputChannels, scene_input_maps
 from zendar_baselines.fingerprints import dataset_index, dataset_location
 
 #: Bootstrap resamples (over time blocks of the test scenes, :data:`claims.BLOCK_S`) for each row's 95 % interval.
@@ -82,7 +83,7 @@ class _ScoringScene:
     reader: SceneReader
     poses: EgoPoses
     sar: SarFrames
-    maps: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    maps: dict[tuple[str, InputChannels], np.ndarray] = dataclasses.field(default_factory=dict)
 
 
 class ScoringScenes:
@@ -137,19 +138,17 @@ class ScoringScenes:
         with self.index.open_scene(scene_id) as reader:
             yield _ScoringScene(reader, reader.ego_poses(), SarFrames(reader))
 
-    def maps(self, scene: _ScoringScene, radar: str) -> np.ndarray:
-        """Log-power maps ``[N, A, R, D]`` of one radar of ``scene`` (kept with the scene)."""
-        from zendar_baselines.cnn.maps import log_power_maps
-
-        if radar not in scene.maps:
-            maps = log_power_maps(scene.reader.array(f"radar/{radar}/cube"))
+    def maps(self, scene: _ScoringScene, radar: str, channels: InputChannels = InputChannels()) -> np.ndarray:
+        """CNN input maps ``[N, C, R, D]`` of one radar of ``scene`` (kept with the scene):
+        log power per antenna and the optional ``channels``."""
+        key = (radar, channels)
+        if key not in scene.maps:
+            maps = scene_input_maps(scene.reader, radar, channels)
             maps.flags.writeable = False
             if not self.keep:
                 return maps
-            scene.maps[radar] = maps
-        return scene.maps[radar]
-
-
+            scene.maps[key] = maps
+        return scene.maps[key]
 
 
 def load_model(checkpoint: Path, device: str) -> tuple[Any, dict[str, Any]]:
@@ -159,9 +158,15 @@ def load_model(checkpoint: Path, device: str) -> tuple[Any, dict[str, Any]]:
 
     stored = load_checkpoint(checkpoint)  # SHA-256 against the manifest, once
     architecture = stored["architecture"]
-    model = build_model(architecture["name"], architecture["in_channels"], architecture["width_scale"])
+    model = build_model(architecture["name"], architecture["in_channels"], architecture["width_scale"],
+                        architecture.get("inputs"))
     load_model_state(model, stored, checkpoint)
     return model.to(device), architecture
+
+
+def model_inputs(architecture: dict[str, Any]) -> InputChannels:
+    """The input channels a checkpoint's model reads (the paper's input when it records none)."""
+    return InputChannels.from_json(architecture.get("inputs"))
 
 
 def cube_probabilities(model, maps: np.ndarray, window: int, device: str) -> np.ndarray:
@@ -183,13 +188,13 @@ def peak_cells_of(probability: dict[str, np.ndarray], floor: float = PEAK_FLOOR)
     return lambda radar, k, cube: probability_peaks(probability[radar][k], floor)
 
 
-def model_cells_for(model, window: int, device: str) -> CellsFor:
+def model_cells_for(model, window: int, device: str, maps_of: Callable[[SceneReader, str], np.ndarray]) -> CellsFor:
     """For any open scene, the cells of its cubes by ``model``'s peaks (the CNN rows' fit of the chain,
-    :mod:`zendar_baselines.classical.chain_fit`)."""
-    from zendar_baselines.cnn.maps import log_power_maps
+    :mod:`zendar_baselines.classical.chain_fit`); ``maps_of(reader, radar)``: the model's input maps
+    ``[N, C, R, D]`` of one radar (e.g. the run's cached :func:`zendar_baselines.bench.steps.scene_maps`)."""
 
     def cells_for(reader: SceneReader) -> CellsOf:
-        return peak_cells_of({radar: cube_probabilities(model, log_power_maps(reader.array(f"radar/{radar}/cube")), window, device)
+        return peak_cells_of({radar: cube_probabilities(model, maps_of(reader, radar), window, device)
                               for radar in reader.sensors("radar")})
 
     return cells_for
@@ -216,7 +221,8 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     with contextlib.ExitStack() as stack:
         if scenes is None:
             scenes = stack.enter_context(ScoringScenes(root, keep=False))
-        results = _predict_test_split(model, scenes, window, params, device, architecture["name"], progress)
+        results = _predict_test_split(model, model_inputs(architecture), scenes, window, params, device,
+                                      architecture["name"], progress)
     meta = {"method": f"{architecture['name']} probability peaks + SAR test + DBSCAN", "checkpoint": checkpoint.name,
             "architecture": architecture, "parameters": params.to_json(), "peak_floor": PEAK_FLOOR}
     if chain_fit is not None:
@@ -224,14 +230,14 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     return {"meta": meta, "results": results}
 
 
-def _predict_test_split(model, scenes: ScoringScenes, window: int, params: ChainParams, device: str,
-                        name: str, progress: bool) -> dict[str, list[dict[str, float]]]:
+def _predict_test_split(model, channels: InputChannels, scenes: ScoringScenes, window: int, params: ChainParams,
+                        device: str, name: str, progress: bool) -> dict[str, list[dict[str, float]]]:
     """Per test frame id, the detections of ``model``'s peaks through the chain (see :func:`cnn_predictions`)."""
     results: dict[str, list[dict[str, float]]] = {}
     with tqdm(desc=f"{name} test", unit="frame", disable=not progress) as bar:
         for scene_id in scenes.scene_ids():
             with scenes.opened(scene_id) as scene:
-                probability = {radar: cube_probabilities(model, scenes.maps(scene, radar), window, device)
+                probability = {radar: cube_probabilities(model, scenes.maps(scene, radar, channels), window, device)
                                for radar in scene.reader.sensors("radar")}
                 for frame_ns, found in frame_cube_points(scene.reader, peak_cells_of(probability), params,
                                                          poses=scene.poses, sar=scene.sar):

@@ -29,6 +29,7 @@ from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
 
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.run_directory import read_json
+from zendar_baselines.cnn.input_channels import InputChannels
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_index
 from zendar_baselines.labels.mask_classes import UNCERTAIN
@@ -190,24 +191,27 @@ def _write_manual_label_masks(run: RunContext, scene_ids: list[str], step_dir: P
 # --- inputs --------------------------------------------------------------------------------------
 
 
-def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
-    """Normalised log-power maps ``[N, A, R, D]`` float32 of one radar, memory-mapped from ``cache_dir``.
+def scene_maps(reader: SceneReader, radar: str, cache_dir: Path, channels: InputChannels = InputChannels()) -> np.ndarray:
+    """CNN input maps ``[N, C, R, D]`` float32 of one radar, memory-mapped from ``cache_dir``.
 
-    Written once per scene and radar (atomically: temporary name, then rename) and reused. The
-    maps are streamed into a memory-mapped temporary, so they are renamed here rather than passed
-    whole to :mod:`zendar_dataset.atomic_files`.
+    The normalised log-power maps (``C = A``), followed by the optional ``channels``
+    (:func:`zendar_baselines.cnn.input_channels.input_maps`). Written once per scene, radar and
+    channel set (atomically: temporary name, then rename) and reused. The maps are streamed into a
+    memory-mapped temporary, so they are renamed here rather than passed whole to
+    :mod:`zendar_dataset.atomic_files`.
     """
-    from zendar_baselines.cnn.maps import log_power_maps
+    from zendar_baselines.cnn.input_channels import scene_input_maps
 
-    path = cache_dir / f"{reader.scene_id}__{radar}.npy"
+    suffix = "" if channels.is_paper_input else f"__{channels.name}"
+    path = cache_dir / f"{reader.scene_id}__{radar}{suffix}.npy"
     if not path.is_file():
-        cubes = reader.array(f"radar/{radar}/cube")
-        n, n_range, n_doppler, n_rx = cubes.shape
+        n, n_range, n_doppler, n_rx = reader.array(f"radar/{radar}/cube").shape
         cache_dir.mkdir(parents=True, exist_ok=True)
         temp = temporary_sibling(path)
         try:
-            maps = np.lib.format.open_memmap(temp, mode="w+", dtype=np.float32, shape=(n, n_rx, n_range, n_doppler))
-            log_power_maps(cubes, out=maps)
+            shape = (n, channels.channels_per_map(n_rx), n_range, n_doppler)
+            maps = np.lib.format.open_memmap(temp, mode="w+", dtype=np.float32, shape=shape)
+            scene_input_maps(reader, radar, channels, out=maps)
             maps.flush()
             del maps
             os.replace(temp, path)
@@ -219,8 +223,10 @@ def scene_maps(reader: SceneReader, radar: str, cache_dir: Path) -> np.ndarray:
 # --- training ------------------------------------------------------------------------------------
 
 
-def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupervisedSplit | None = None):
-    """Training samples (windows and the mask of their newest cube) of ``scenes`` from a mask store.
+def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupervisedSplit | None = None,
+            channels: InputChannels = InputChannels()):
+    """Training samples (windows of ``channels``' maps and the mask of their newest cube) of ``scenes``
+    from a mask store.
 
     With ``split``, only the samples whose newest cube lies in a labelled segment (the manual-label
     phases); without, every sample (pretraining on automatic labels). The windows' older maps may
@@ -240,7 +246,7 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupe
                 if not np.array_equal(timestamps, reader.timestamps(f"radar/{radar}")):
                     raise ZendarError(f"{store_dir}: the masks of {scene_id} {radar} do not match the dataset's cube "
                                       "times; the store was made from another dataset")
-                maps = scene_maps(reader, radar, run.inputs_dir)
+                maps = scene_maps(reader, radar, run.inputs_dir, channels)
                 if split is None:
                     parts.append(MaskFrames(maps, targets, window=run.config.window))
                     continue
@@ -269,18 +275,18 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
 
     config, split = run.config, labels.split
     split.check_manual_label_use(split.labelled)
-    labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR, split)
+    labelled = _frames(run, list(split.labelled), labels.masks_dir / STORE_DIR, split, row.inputs)
     in_channels = labelled.datasets[0].in_channels
-    labelled, validation, validation_record = validation_frames(run, labels, labelled)
+    labelled, validation, validation_record = validation_frames(run, labels, labelled, row.inputs)
 
     def fresh_model():
         seed_everything(row.seed)
-        return build_model(row.model_name, in_channels, config.width_scale).to(run.device)
+        return build_model(row.model_name, in_channels, config.width_scale, row.inputs.to_json()).to(run.device)
 
     results = {}
     init_from = None
     if row.pretrained:
-        everything = _frames(run, sorted((*split.labelled, *split.unlabelled)), labels.auto_dir / STORE_DIR)
+        everything = _frames(run, sorted((*split.labelled, *split.unlabelled)), labels.auto_dir / STORE_DIR, channels=row.inputs)
         model = fresh_model()
         results["pretrain"] = train(
             model, everything, config.pretrain, seed=row.seed, out_dir=out_dir / "pretrain", device=run.device,
@@ -298,9 +304,10 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
     return results[phase].checkpoint_path
 
 
-def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatDataset
-                      ) -> tuple[ConcatDataset, ConcatDataset, dict[str, Any]]:
-    """The samples that choose the checkpoints, and the labelled samples left to train on.
+def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatDataset,
+                      channels: InputChannels = InputChannels()) -> tuple[ConcatDataset, ConcatDataset, dict[str, Any]]:
+    """The samples that choose the checkpoints (windows of ``channels``' maps), and the labelled
+    samples left to train on.
 
     The validation scenes' manual-label masks (``labels.validation_dir``) when the dataset has
     validation scenes. Otherwise the last :data:`HOLD_OUT_FRACTION` of every labelled scene's and
@@ -322,7 +329,7 @@ def validation_frames(run: RunContext, labels: TrainingLabels, labelled: ConcatD
     window = run.config.window
     scene_ids = run.dataset.scene_ids("val")
     if scene_ids:
-        validation = _every_kth(_frames(run, scene_ids, labels.validation_dir / STORE_DIR), window)
+        validation = _every_kth(_frames(run, scene_ids, labels.validation_dir / STORE_DIR, channels=channels), window)
         return labelled, validation, {"source": "val split", "scenes": scene_ids, "window_stride": window,
                                       "n_samples": len(validation)}
     labelled, held_out = hold_out_tail(labelled, HOLD_OUT_FRACTION, gap=window - 1)

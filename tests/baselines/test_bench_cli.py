@@ -216,8 +216,9 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     assert done.returncode == 0, done.stderr[-3000:]
     assert "[rows/cfar] reused" in done.stderr and "fpn-resnet34 supervised seed 0" in done.stderr
     results = json.loads((copy / "results.json").read_text())
-    assert [a["ablation"] for a in results["ablations"]] == ["sar-reading-alone", "cfar-gated-targets"]
-    assert [a["reference"] for a in results["ablations"]] == ["cfar", "fpn-resnet34-supervised"]
+    assert [a["ablation"] for a in results["ablations"]] == [
+        "sar-reading-alone", "cfar-gated-targets", "phase-difference-channels", "static-doppler-channel"]
+    assert [a["reference"] for a in results["ablations"]] == ["cfar", *["fpn-resnet34-supervised"] * 3]
     for ablation in results["ablations"]:
         row_ap = json.loads((copy / ablation["row"]["metrics"]).read_text())["ap"]
         reference_ap = json.loads((copy / "rows" / ablation["reference"] / "metrics.json").read_text())["ap"]
@@ -229,6 +230,15 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     assert meta["parameters"]["sar"]["value"] == "SAR reading"
     store = json.loads((copy / "ablations" / "cfar-gated-targets" / "label_masks" / "store" / "manifest.json").read_text())
     assert store["parameters"]["manual_targets"] == "cfar-peaks"
+    # The channel rows' models read their own inputs: 4 antennas' log power and 6 phase channels, or 1
+    # residual channel, per map of the window; the reference row's the log power alone.
+    window = json.loads((copy / "results.json").read_text())["config"]["window"]
+    for name, per_map in (("phase-difference-channels", 10), ("static-doppler-channel", 5)):
+        meta = json.loads((copy / "ablations" / name / "seed-0" / "predictions.json").read_text())["meta"]
+        assert meta["architecture"]["in_channels"] == window * per_map
+        assert set(meta["architecture"]["inputs"].values()) == {True, False}
+    meta = json.loads((copy / "rows" / "fpn-resnet34-supervised" / "predictions.json").read_text())["meta"]
+    assert meta["architecture"]["in_channels"] == window * 4 and "inputs" not in meta["architecture"]
     table = (copy / "ablations.md").read_text()
     assert "sar-reading-alone (vs cfar)" in table and "cfar-gated-targets (vs fpn-resnet34-supervised)" in table
     assert (copy / "ablations.md").read_text() in (copy / "table.md").read_text()

@@ -54,7 +54,7 @@ MODEL_BUILDERS: dict[str, Callable[[int, float], nn.Module]] = {
 MODEL_NAMES = tuple(MODEL_BUILDERS)
 
 
-def build_model(name: str, in_channels: int, width_scale: float = 1.0) -> nn.Module:
+def build_model(name: str, in_channels: int, width_scale: float = 1.0, inputs: dict[str, bool] | None = None) -> nn.Module:
     """The detector called ``name``, freshly initialised.
 
     Parameters
@@ -65,12 +65,15 @@ def build_model(name: str, in_channels: int, width_scale: float = 1.0) -> nn.Mod
         C of the input [B, C, R, D].
     width_scale : float
         Multiplies every channel width (1.0 = the published widths).
+    inputs : dict, optional
+        The optional input channels the model reads
+        (:meth:`zendar_baselines.cnn.input_channels.InputChannels.to_json`); None for the paper's input.
 
     Returns
     -------
     nn.Module
-        With ``architecture`` = {"name", "in_channels", "width_scale"}, what a checkpoint records to
-        rebuild and check it.
+        With ``architecture`` = {"name", "in_channels", "width_scale"} (and "inputs" when given), what
+        a checkpoint records to rebuild and check it and to make its input.
 
     Raises
     ------
@@ -85,6 +88,8 @@ def build_model(name: str, in_channels: int, width_scale: float = 1.0) -> nn.Mod
     width_scale = check_width_scale(width_scale)
     model = MODEL_BUILDERS[name](in_channels, width_scale)
     model.architecture = {"name": name, "in_channels": in_channels, "width_scale": width_scale}
+    if inputs is not None:
+        model.architecture["inputs"] = dict(inputs)
     return model
 
 
