@@ -31,6 +31,7 @@ import numpy as np
 
 from zendar_dataset.release import ReleaseStream, import_release
 from zendar_dataset.release import records as rec
+from zendar_dataset.release.wire import decode
 
 T0_S = 1_264_000_000.0
 ORIGIN_ECEF = np.array([-2_706_000.0, -4_261_000.0, 3_885_000.0])
@@ -172,22 +173,25 @@ def plain_read(root: pathlib.Path) -> None:
 
 
 def decode_only(root: pathlib.Path) -> None:
+    """Every record of every stream into arrays, as the import decodes them (the tracklog column-wise,
+    detections and lidar sweeps through their column decoders, SAR images as C-order grids), nothing written."""
     for path in sorted(root.rglob("*.pbs")):
         with ReleaseStream(path) as stream:
             kind = stream.kind
+            if kind.name == "Position":
+                _, offsets, lengths = stream.spans()
+                rec.poses(stream.buffer, offsets, lengths)
+                continue
             for _, buf, start, end in stream.records():
                 if kind.name == "TrackerState":
                     rec.detections(kind, buf, start, end)
                 elif kind.name == "LidarPointsFrame":
                     rec.lidar_sweep(kind, buf, start, end)
+                elif kind.name == "Image":
+                    np.ascontiguousarray(rec.sar_grid(rec.sar_frame_record(kind, buf, start, end))[0])
                 else:
-                    record = stream.kind.message
-                    from zendar_dataset.release.wire import decode
-
-                    decoded = decode(record, buf, start, end)
-                    if kind.name == "Image":
-                        np.ascontiguousarray(rec.sar_grid(rec.sar_frame(kind, decoded))[0])
-                    elif kind.name == "RangeDopplerFrame":
+                    decoded = decode(kind.message, buf, start, end)
+                    if kind.name == "RangeDopplerFrame":
                         np.frombuffer(decoded["data"], "<c8")
 
 

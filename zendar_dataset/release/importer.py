@@ -286,7 +286,11 @@ class _SceneImport:
         """The lidar's (time, ECEF points) in file order up to the first sweep after ``last_s``, decoded once
         for all radars (the sweeps are the bulk of a scene's bytes)."""
         if lidar.path not in self._lidar_probes:
-            sweeps = ((s.timestamp_s, s.position_ecef) for s in decoded_records(lidar, rec.lidar_sweep, probe=True))
+            # Copies: a view would keep each whole decoded sweep alive while the probes are kept.
+            sweeps = (
+                (s.timestamp_s, np.ascontiguousarray(s.position_ecef))
+                for s in decoded_records(lidar, rec.lidar_sweep, probe=True)
+            )
             self._lidar_probes[lidar.path] = ([], sweeps)
         seen, rest = self._lidar_probes[lidar.path]
         while not seen or seen[-1][0] <= last_s:
@@ -391,14 +395,21 @@ class _SceneImport:
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
                 points_in_enu = True
-            keep = np.all(np.isfinite(local), axis=1) & np.all(np.isfinite(sweep.position_ecef), axis=1)
-            dropped += int(np.count_nonzero(~keep))
+            keep = np.isfinite(local).all(axis=1) & np.isfinite(sweep.position_ecef).all(axis=1)
+            lost = int(keep.size - np.count_nonzero(keep))
+            dropped += lost
             ns = stamps.take(sweep.timestamp_s)
             if ns is None:
                 continue
-            points = np.column_stack([local[keep], np.nan_to_num(sweep.intensity[keep])]).astype(np.float32)
-            out.append_lidar(name, ns, points.reshape(-1, 4))
-            ecef_parts.append(sweep.position_ecef[keep])
+            # Every point kept is the rule: views then, not gathers.
+            kept = slice(None) if lost == 0 else keep
+            rows = local[kept]
+            points = np.empty((rows.shape[0], 4), np.float32)
+            points[:, :3] = rows
+            points[:, 3] = np.nan_to_num(sweep.intensity[kept])  # float64 first, as ever: an inf stays inf in float32
+            out.append_lidar(name, ns, points)
+            # A copy, not a view that would keep the whole decoded sweep alive until the end of the stream.
+            ecef_parts.append(np.ascontiguousarray(sweep.position_ecef[kept]))
         stamps.report()
         if not ecef_parts:
             return

@@ -21,11 +21,15 @@ _MIN_POINTS = 5
 _REPORT_CAP_DB = 60.0  # beyond this the figure says nothing more (a bright pixel against a zero background)
 
 
-def _brightness(flat: np.ndarray, index: np.ndarray) -> float:
-    """Median magnitude at flat ``index`` over the buffer's median magnitude (a sparse sample of it:
-    a full median per 512×512 frame would cost more than decoding it)."""
+def _background(flat: np.ndarray) -> float:
+    """The buffer's median magnitude, from a sparse sample of it (a full median per 512×512 frame would
+    cost more than decoding it)."""
     sample = np.abs(flat[:: max(1, flat.size // 4096)])
-    background = float(np.median(sample)) or float(np.mean(sample)) or 1.0
+    return float(np.median(sample)) or float(np.mean(sample)) or 1.0
+
+
+def _brightness(flat: np.ndarray, index: np.ndarray, background: float) -> float:
+    """Median magnitude at flat ``index`` over the buffer's ``background``."""
     return float(np.median(np.abs(flat[index]))) / background
 
 
@@ -74,8 +78,9 @@ def vote_pixel_order(frames: list[SarFrame], probes: list[tuple[float, np.ndarra
         except ValueError:
             continue
         i, j = i[inside], j[inside]
-        score_a = _brightness(flat, j * frame.rows + i)
-        score_b = _brightness(flat, i * frame.cols + j)
+        background = _background(flat)  # the same under both readings
+        score_a = _brightness(flat, j * frame.rows + i, background)
+        score_b = _brightness(flat, i * frame.cols + j, background)
         log_ratios.append(np.log(max(score_a, 1e-12) / max(score_b, 1e-12)))
         used += int(np.count_nonzero(inside))
     if used < _MIN_POINTS:

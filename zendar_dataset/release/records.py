@@ -1,7 +1,7 @@
 """Decoded release records as arrays: SAR frames, detections, lidar sweeps, poses, cubes.
 
 Repeated sub-messages (detections, lidar points) are decoded column-wise
-(:func:`zendar_dataset.release.wire.decode_repeated_columns`); everything
+(:func:`zendar_dataset.release.columns.decode_repeated_columns`); everything
 else goes through the strict generic decoder.
 """
 
@@ -13,7 +13,8 @@ import numpy as np
 
 from zendar_dataset.release import messages as m
 from zendar_dataset.release.messages import Kind
-from zendar_dataset.release.wire import WireError, count_unknown, decode, decode_repeated_columns, repeated_spans
+from zendar_dataset.release.columns import Columns, decode_repeated_columns, decode_repeated_field
+from zendar_dataset.release.wire import WireError, count_unknown, decode
 
 REAL_32U = 5
 COMPLEX_32F = 1
@@ -199,10 +200,8 @@ def poses(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every ``Position`` record of a stream, column-wise: ``[K]`` GPS seconds, ``[K, 3]`` ECEF metres,
     ``[K, 4]`` wxyz (NaN where absent); raises :class:`WireError` at the first record that does not decode."""
-    n = offsets.shape[0]
     raw = _columns(m.POSITION, buf, offsets, lengths, unknown)
-    attitude = np.stack([raw.get(f"attitude.{axis}", np.full(n, np.nan)) for axis in "wxyz"], axis=1)
-    return raw.get("timestamp", np.full(n, np.nan)), _xyz(raw, "position", n), attitude
+    return raw["timestamp"], raw.block("position", "xyz"), raw.block("attitude", "wxyz")
 
 
 @dataclass
@@ -254,13 +253,23 @@ def _check_others(message, others: dict[int, list], repeated: int, unknown: dict
 
 def _columns(
     element, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray, unknown: dict[str, int] | None = None
-) -> dict[str, np.ndarray]:
-    columns, slow = decode_repeated_columns(element, buf, offsets, lengths, unknown)
-    n = offsets.shape[0]
+) -> Columns:
+    """The elements column-wise (:func:`_complete`)."""
+    columns, slow = decode_repeated_columns(element, buf, offsets, lengths)
+    return _complete(columns, slow, element, buf, offsets, lengths, unknown)
+
+
+def _complete(
+    columns: Columns, slow: list[int], element, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray,
+    unknown: dict[str, int] | None,
+) -> Columns:
+    """Decode the elements the compiled loop handed back with the generic decoder, in order (so the first that
+    does not decode raises its :class:`WireError`, and unknown fields are counted)."""
     for index in slow:
         decoded = decode(element, buf, int(offsets[index]), int(offsets[index] + lengths[index]), unknown)
         for name, value in _flatten(decoded):
-            columns.setdefault(name, np.full(n, np.nan))[index] = value
+            if name in columns:  # every numeric field the conversions read is a column
+                columns[name][index] = value
     return columns
 
 
@@ -272,17 +281,15 @@ def _flatten(decoded: dict, prefix: str = ""):
             yield f"{prefix}{name}", value
 
 
-def _xyz(columns: dict[str, np.ndarray], name: str, n: int) -> np.ndarray:
-    return np.stack([columns.get(f"{name}.{axis}", np.full(n, np.nan)) for axis in "xyz"], axis=1)
-
-
 def detections(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> Detections:
     """A :class:`Detections` from one ``TrackerState`` record of either generation (strictly checked;
     ``unknown`` as :func:`~zendar_dataset.release.wire.decode`'s).
 
     Raises :class:`MissingField` for a 2021 record without ``meta`` (optional; it holds the timestamp).
     """
-    offsets, lengths, others = repeated_spans(buf, start, end, 2)
+    element = kind.message.fields[2].type
+    points = decode_repeated_field(element, 2, buf, start, end)
+    others = points.others
     _check_others(kind.message, others, 2, unknown)
     head_message = m.METADATA if kind.generation == "2021" else m.TIME_RECORD
     if kind.generation == "2021" and 1 not in others:
@@ -300,11 +307,10 @@ def detections(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[
         if 4 in others:
             offset, length = others[4][-1][1]
             serial = bytes(buf[offset : offset + length]).decode("utf-8", errors="replace")
-    n = offsets.shape[0]
-    raw = _columns(kind.message.fields[2].type, buf, offsets, lengths, unknown)
+    raw = _complete(points.columns, points.slow, element, buf, points.offsets, points.lengths, unknown)
     names = _POINT_COLUMNS["2021" if kind.generation == "2021" else "2020"]
-    columns = {ours: raw.get(theirs, np.full(n, np.nan)) for ours, theirs in names.items()}
-    columns["position_ecef"] = _xyz(raw, "position", n)
+    columns = {ours: raw[theirs] for ours, theirs in names.items()}
+    columns["position_ecef"] = raw.block("position", "xyz")
     return Detections(float(timestamp), frame_id, serial, columns)
 
 
@@ -324,17 +330,15 @@ class LidarSweep:
 def lidar_sweep(kind: Kind, buf: memoryview, start: int, end: int, unknown: dict[str, int] | None = None) -> LidarSweep:
     """A :class:`LidarSweep` from one ``LidarPointsFrame`` of either point layout (``unknown`` as
     :func:`~zendar_dataset.release.wire.decode`'s)."""
-    offsets, lengths, others = repeated_spans(buf, start, end, 2)
-    _check_others(kind.message, others, 2, unknown)
-    offset, _ = others[1][-1][1]
-    timestamp = float(np.frombuffer(buf, "<f8", 1, offset)[0])
     element = kind.message.fields[2].type
-    n = offsets.shape[0]
-    raw = _columns(element, buf, offsets, lengths, unknown)
-    intensity = raw.get("intensity", np.full(n, np.nan))
+    points = decode_repeated_field(element, 2, buf, start, end)
+    _check_others(kind.message, points.others, 2, unknown)
+    offset, _ = points.others[1][-1][1]
+    timestamp = float(np.frombuffer(buf, "<f8", 1, offset)[0])
+    raw = _complete(points.columns, points.slow, element, buf, points.offsets, points.lengths, unknown)
     if kind.generation == "2021-01 draft":
-        return LidarSweep(timestamp, _xyz(raw, "position", n), None, intensity)
-    return LidarSweep(timestamp, _xyz(raw, "position_global", n), _xyz(raw, "position_local", n), intensity)
+        return LidarSweep(timestamp, raw.block("position", "xyz"), None, raw["intensity"])
+    return LidarSweep(timestamp, raw.block("position_global", "xyz"), raw.block("position_local", "xyz"), raw["intensity"])
 
 
 def looks_ecef(points: np.ndarray) -> bool:

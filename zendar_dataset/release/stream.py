@@ -30,7 +30,7 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.release.messages import Kind, kinds_named
-from zendar_dataset.release.wire import WireError, check, decode
+from zendar_dataset.release.wire import WireError, check, decode, scan
 
 HEADER_BYTES = 8
 _GZIP_MAGIC = b"\x1f\x8b"
@@ -344,9 +344,10 @@ class ReleaseStream:
                 continue
             survivors = []
             errors = []
+            scanned = scan(self._data, offset, offset + length)  # once for every kind tried
             for kind in alive:
                 try:
-                    fields_seen[kind.label] |= check(kind.message, self._data, offset, offset + length)
+                    fields_seen[kind.label] |= check(kind.message, self._data, offset, offset + length, scanned=scanned)
                     survivors.append(kind)
                 except WireError as exc:
                     errors.append(str(exc))

@@ -8,10 +8,9 @@ record at the first wire-type mismatch or unknown field (the runtime accepts
 both into unknown fields).  The bulk of the input bytes are ``bytes`` fields
 (SAR images, range-Doppler cubes) that this decoder returns as zero-copy
 ``memoryview`` slices, so decoding costs little more than walking the tags.
-Repeated sub-messages with many elements (detections, lidar points) go
-through :func:`decode_repeated_columns`, which decodes every element with one
-fixed layout as a strided numpy view and falls back to the generic decoder
-only for elements laid out otherwise.
+Repeated sub-messages with many elements (detections, lidar points) are
+decoded column-wise by ``release/columns.py``, which falls back to
+:func:`decode` for any element it does not accept.
 """
 
 from __future__ import annotations
@@ -200,8 +199,9 @@ def count_unknown(unknown: dict[str, int], message: Message, number: int) -> Non
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _varint_compiled(data: np.ndarray, pos: int, end: int):  # pragma: no cover - compiled
-    """:func:`read_varint` for the compiled scan: ``(value, next position, complete)``."""
+def read_varint_compiled(data: np.ndarray, pos: int, end: int):  # pragma: no cover - compiled
+    """:func:`read_varint` for compiled walks: ``(value, next position, complete)``; a value past 63 bits
+    comes out negative."""
     value = 0
     shift = 0
     while True:
@@ -232,7 +232,7 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
     pos = start
     while pos < end:
         tag_at = pos
-        tag, pos, ok = _varint_compiled(data, pos, end)
+        tag, pos, ok = read_varint_compiled(data, pos, end)
         if not ok:
             return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
         number = tag >> 3
@@ -242,13 +242,13 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
         if number == 0:
             return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
         if wire == 0 or wire == 2:
-            value, pos, ok = _varint_compiled(data, pos, end)
+            value, pos, ok = read_varint_compiled(data, pos, end)
             if not ok:
                 return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
             if wire == 2:
                 length = value
                 value = pos
-                if length > end - pos:
+                if length < 0 or length > end - pos:  # negative: a varint past 63 bits
                     return numbers[:n], wires[:n], values[:n], lengths[:n], tag_at
                 pos += length
         elif wire == 1 or wire == 5:
@@ -267,241 +267,99 @@ def _scan(data: np.ndarray, start: int, end: int):  # pragma: no cover - compile
     return numbers[:n], wires[:n], values[:n], lengths[:n], -1
 
 
-def check(message: Message, buf: memoryview, start: int = 0, end: int | None = None, sample: int = 8) -> frozenset[int]:
+@dataclass
+class Scanned:
+    """The top-level fields of a message's bytes (:func:`scan`), for :func:`check` to test several messages
+    against without walking or grouping them again.
+
+    Attributes
+    ----------
+    numbers, wires, values, lengths : ndarray, [n], int64
+        Field numbers, wire types, values (varints) or payload offsets, payload lengths.
+    error_at : int
+        Offset where the encoding breaks, -1 when it does not.
+    """
+
+    numbers: np.ndarray
+    wires: np.ndarray
+    values: np.ndarray
+    lengths: np.ndarray
+    error_at: int
+    _groups: dict[int, list] = field(default_factory=dict, init=False, repr=False)  # per sample size
+
+    def groups(self, sample: int) -> list[tuple[int, int, list[int], list[int]]]:
+        """Per field number present, in increasing order: how often it occurs, its distinct wire types in order
+        of first occurrence, and the indices of its first ``sample`` occurrences."""
+        if sample not in self._groups:
+            self._groups[sample] = _field_groups(self.numbers, self.wires, sample)
+        return self._groups[sample]
+
+
+def scan(buf: memoryview, start: int, end: int) -> Scanned:
+    """The top-level fields of ``buf[start:end]``."""
+    return Scanned(*_scan(np.frombuffer(buf, np.uint8), start, end))
+
+
+def check(
+    message: Message, buf: memoryview, start: int = 0, end: int | None = None, sample: int = 8, scanned: Scanned | None = None
+) -> frozenset[int]:
     """Raise :class:`WireError` unless ``buf[start:end]`` is a strict encoding of ``message``.
 
     The same rules as :func:`decode` (no unknown field, matching wire types, singular fields
     once, required fields present), checked on every top-level field but only on the first
     ``sample`` elements of each repeated sub-message, so sniffing a 30 000-point lidar sweep
-    costs microseconds rather than a full decode.  Returns the top-level field numbers present.
+    costs microseconds rather than a full decode.  ``scanned``: :func:`scan` of the same bytes,
+    when several messages are checked against one record (sniffing).  Returns the top-level
+    field numbers present.
     """
     end = len(buf) if end is None else end
-    numbers, wires, values, lengths, error_at = _scan(np.frombuffer(buf, np.uint8), start, end)
+    scanned = scanned if scanned is not None else scan(buf, start, end)
+    values, lengths, error_at = scanned.values, scanned.lengths, scanned.error_at
     if error_at >= 0:
         list(iter_fields(buf, error_at, end))  # raises WireError with the reason
         raise WireError(f"{message.name}: malformed field", error_at)
-    present, counts = np.unique(numbers, return_counts=True)
-    for number, count in zip(present.tolist(), counts.tolist()):
+    present = []
+    for number, count, distinct_wires, first in scanned.groups(sample):
+        present.append(number)
         spec = message.fields.get(number)
-        where = np.flatnonzero(numbers == number)
         if spec is None:
-            raise WireError(f"{message.name}: unknown field {number} (wire type {int(wires[where[0]])})", start)
+            raise WireError(f"{message.name}: unknown field {number} (wire type {distinct_wires[0]})", start)
         expected = message.wire_type(number)
-        wrong = wires[where] != expected
-        if spec.repeated and isinstance(spec.type, str) and spec.type in _PACKABLE:
-            wrong &= wires[where] != LENGTH  # packed
-        if np.any(wrong):
-            found = int(wires[where[np.argmax(wrong)]])
-            raise WireError(f"{message.name}.{spec.name} (field {number}): expected wire type {expected}, found {found}", start)
+        packed = spec.repeated and isinstance(spec.type, str) and spec.type in _PACKABLE
+        wrong = [wire for wire in distinct_wires if wire != expected and not (packed and wire == LENGTH)]
+        if wrong:
+            raise WireError(f"{message.name}.{spec.name} (field {number}): expected wire type {expected}, found {wrong[0]}", start)
         if not spec.repeated and count > 1:
             raise WireError(f"{message.name}.{spec.name} (field {number}): appears twice", start)
         if isinstance(spec.type, Message):
-            for k in where[:sample].tolist():
+            for k in first:
                 check(spec.type, buf, int(values[k]), int(values[k] + lengths[k]), sample)
-    missing = message.required - set(present.tolist())
+    missing = message.required - set(present)
     if missing:
         names = ", ".join(f"{message.fields[n].name} ({n})" for n in sorted(missing))
         raise WireError(f"{message.name}: missing required field {names}", start)
-    return frozenset(present.tolist())
+    return frozenset(present)
 
 
-def repeated_spans(buf: memoryview, start: int, end: int, number: int) -> tuple[np.ndarray, np.ndarray, dict[int, list]]:
-    """Offsets and lengths of every occurrence of length-delimited field ``number``, and the other fields.
-
-    Returns
-    -------
-    offsets, lengths : np.ndarray, int64, [n]
-        Payload position and size of each occurrence, in buffer order.
-    others : dict
-        Field number -> list of ``(wire type, value)`` for every other field.
-    """
-    numbers, wires, values, lengths, error_at = _scan(np.frombuffer(buf, np.uint8), start, end)
-    if error_at >= 0:
-        list(iter_fields(buf, error_at, end))  # raises WireError with the reason
-    bulk = (numbers == number) & (wires == LENGTH)
-    others: dict[int, list] = {}
-    for i in np.flatnonzero(~bulk):
-        wire = int(wires[i])
-        value = int(values[i]) if wire == VARINT else (int(values[i]), int(lengths[i]))
-        others.setdefault(int(numbers[i]), []).append((wire, value))
-    return values[bulk], lengths[bulk], others
+_FEW_FIELDS = 64  # below this, grouping fields in Python beats a dozen numpy calls per message
 
 
-@dataclass(frozen=True)
-class Column:
-    """Where a numeric value sits inside a fixed-layout element: byte offset in the payload and dtype."""
-
-    name: str
-    offset: int
-    dtype: str
-    signed32: bool = False  # an int32 varint: the low 32 bits, two's complement
-
-
-def _layout(message: Message, buf: memoryview, start: int, end: int) -> tuple[bytes, list[Column]] | None:
-    """The tag bytes and value positions of one element, when every value has a fixed width.
-
-    Returns None when the element holds a varint or a nested field of variable size (those
-    elements take the generic path).
-    """
-    columns: list[Column] = []
-    for number, wire, value, position, after in _fields_with_positions(buf, start, end):
-        spec = message.fields.get(number)
-        if spec is None or spec.repeated:
-            return None
-        kind = spec.type
-        if isinstance(kind, Message):
-            offset, length = value
-            inner = _layout(kind, buf, offset, offset + length)
-            if inner is None:
-                return None
-            columns.extend(Column(f"{spec.name}.{c.name}", c.offset + offset - start, c.dtype) for c in inner[1])
-        elif kind in (DOUBLE, FLOAT) and wire == message.wire_type(number):
-            columns.append(Column(spec.name, value[0] - start, "<f8" if kind == DOUBLE else "<f4"))
-        elif kind in (UINT, INT32) and wire == VARINT:
-            columns.append(Column(spec.name, position - start, f"varint{after - position}", kind == INT32))
-        else:
-            return None
-    # The tag skeleton: every byte that is not a value. Elements with the same skeleton share the layout.
-    mask = _skeleton_mask(end - start, columns)
-    tags = bytes(np.frombuffer(buf, np.uint8, end - start, start)[mask])
-    return tags, columns
-
-
-def _width(column: Column) -> int:
-    return int(column.dtype[6:]) if column.dtype.startswith("varint") else np.dtype(column.dtype).itemsize
-
-
-def _skeleton_mask(size: int, columns: list[Column]) -> np.ndarray:
-    mask = np.ones(size, bool)
-    for column in columns:
-        mask[column.offset : column.offset + _width(column)] = False
-    return mask
-
-
-def _fields_with_positions(buf: memoryview, start: int, end: int):
-    """:func:`iter_fields` plus where each varint value starts and ends."""
-    pos = start
-    for number, wire, value in iter_fields(buf, start, end):
-        _, value_at = read_varint(buf, pos, end)  # skip the tag
-        if wire == VARINT:
-            _, after = read_varint(buf, value_at, end)
-        elif wire == LENGTH:
-            after = value[0] + value[1]
-        else:
-            after = value[0] + value[1]
-        yield number, wire, value, value_at, after
-        pos = after
-
-
-def _record_dtype(size: int, columns: list[Column], tags: bytes) -> tuple[np.dtype, list[tuple[str, bytes]]]:
-    """A structured dtype over one element: a field per value (per byte for varints) and per run of tag bytes."""
-    names, formats, offsets = [], [], []
-    for column in columns:
-        if column.dtype.startswith("varint"):
-            for k in range(_width(column)):
-                names.append(f"{column.name}#{k}")
-                formats.append("u1")
-                offsets.append(column.offset + k)
-        else:
-            names.append(column.name)
-            formats.append(column.dtype)
-            offsets.append(column.offset)
-    mask = _skeleton_mask(size, columns)
-    runs: list[tuple[str, bytes]] = []
-    position = 0
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.view(np.int8), [0]])))
-    for run, (begin, stop) in enumerate(zip(edges[::2], edges[1::2])):
-        name = f"#tags{run}"
-        names.append(name)
-        formats.append(f"V{stop - begin}")
-        offsets.append(int(begin))
-        runs.append((name, tags[position : position + stop - begin]))
-        position += stop - begin
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size}), runs
-
-
-def _records(data: np.ndarray, offsets: np.ndarray, size: int, columns: list[Column], tags: bytes):
-    """The elements at ``offsets`` as a structured array: a strided view when evenly spaced, else a gathered copy."""
-    steps = np.diff(offsets)
-    dtype, runs = _record_dtype(size, columns, tags)
-    if offsets.size == 1 or (np.all(steps == steps[0]) and steps[0] >= size):
-        step = int(steps[0]) if offsets.size > 1 else size
-        return np.ndarray((offsets.size,), dtype, buffer=data, offset=int(offsets[0]), strides=(step,)), runs
-    # Every byte position as the start of an opaque V<size> element (a view, nothing copied): indexing
-    # it copies each chosen element whole (a structured dtype would be copied field by field, and a
-    # byte-wise gather needs an index per byte).
-    starts = np.ndarray((data.size - size + 1,), f"V{size}", buffer=data, offset=0, strides=(1,))
-    return starts[offsets].view(dtype), runs
-
-
-def _record_values(records: np.ndarray, column: Column) -> tuple[np.ndarray, np.ndarray]:
-    """One column as float64 and which elements encode it as laid out (varint continuation bits)."""
-    if not column.dtype.startswith("varint"):
-        return records[column.name].astype(np.float64), np.ones(records.shape[0], bool)
-    width = _width(column)
-    parts = [records[f"{column.name}#{k}"] for k in range(width)]
-    ok = np.ones(records.shape[0], bool)
-    value = np.zeros(records.shape[0], np.uint64)
-    for k, part in enumerate(parts):
-        ok &= (part >= 0x80) if k < width - 1 else (part < 0x80)
-        value |= (part.astype(np.uint64) & np.uint64(0x7F)) << np.uint64(7 * k)
-    if column.signed32:
-        return (value & np.uint64(0xFFFFFFFF)).astype(np.uint32).view(np.int32).astype(np.float64), ok
-    return value.astype(np.float64), ok
-
-
-def decode_repeated_columns(
-    element: Message, buf: memoryview, offsets: np.ndarray, lengths: np.ndarray, unknown: dict[str, int] | None = None
-) -> tuple[dict[str, np.ndarray], list[int]]:
-    """Decode many encodings of one message column-wise into numpy arrays.
-
-    The elements are the payloads at ``offsets`` (``lengths`` bytes each): the occurrences of a
-    repeated sub-message, or the records of a stream.
-
-    Elements whose encoding has the same length and tag skeleton as the first
-    all-fixed-width element are read as strided views (no per-element Python
-    work); the rest are returned by index for the generic decoder.
-
-    ``unknown`` is :func:`decode`'s (elements with unknown fields take the generic path).
-
-    Returns
-    -------
-    columns : dict
-        Dotted field name (``"position.x"``) -> ``[n]`` array, NaN where the fast path did not apply.
-    slow : list of int
-        Indices of the elements the caller must decode with :func:`decode`.
-    """
-    n = offsets.shape[0]
-    data = np.frombuffer(buf, np.uint8)
-    slow: list[int] = []
-    columns: dict[str, np.ndarray] = {}
-    if n == 0:
-        return columns, slow
-    done = np.zeros(n, bool)
-    remaining = np.arange(n)
-    for _ in range(8):  # a few distinct layouts (e.g. one-byte vs two-byte lengths) cover real streams
-        if remaining.size == 0:
-            break
-        first = int(remaining[0])
-        layout = _layout(element, buf, int(offsets[first]), int(offsets[first] + lengths[first]))
-        if layout is None:
-            break
-        decode(element, buf, int(offsets[first]), int(offsets[first] + lengths[first]), unknown)  # strict check once
-        tags, cols = layout
-        size = int(lengths[first])
-        same_length = remaining[lengths[remaining] == size]
-        records, runs = _records(data, offsets[same_length], size, cols, tags)
-        match = np.ones(same_length.size, bool)
-        for name, expected in runs:
-            match &= records[name] == np.array(expected, dtype=records.dtype[name])
-        values = {}
-        for column in cols:
-            values[column.name], ok = _record_values(records, column)
-            match &= ok
-        chosen = same_length[match]
-        for name, column_values in values.items():
-            columns.setdefault(name, np.full(n, np.nan))[chosen] = column_values[match]
-        done[chosen] = True
-        remaining = np.flatnonzero(~done)
-    slow.extend(int(i) for i in np.flatnonzero(~done))
-    return columns, slow
+def _field_groups(numbers: np.ndarray, wires: np.ndarray, sample: int) -> list[tuple[int, int, list[int], list[int]]]:
+    """Per field number present, in increasing order: how often it occurs, its distinct wire types in order
+    of first occurrence, and the indices of its first ``sample`` occurrences."""
+    if numbers.shape[0] < _FEW_FIELDS:
+        groups: dict[int, tuple[list[int], dict[int, None], list[int]]] = {}
+        for k, (number, wire) in enumerate(zip(numbers.tolist(), wires.tolist())):
+            count, distinct, first = groups.setdefault(number, ([0], {}, []))
+            count[0] += 1
+            distinct.setdefault(wire)
+            if len(first) < sample:
+                first.append(k)
+        return [(number, count[0], list(distinct), first) for number, (count, distinct, first) in sorted(groups.items())]
+    out = []
+    present, counts = np.unique(numbers, return_counts=True)
+    for number, count in zip(present.tolist(), counts.tolist()):
+        where = np.flatnonzero(numbers == number)
+        distinct, first_at = np.unique(wires[where], return_index=True)
+        out.append((number, count, distinct[np.argsort(first_at)].tolist(), where[:sample].tolist()))
+    return out
