@@ -1,7 +1,7 @@
 """Command line of ``zendar-bench``.
 
     zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
-                 [--ablations] [--device cpu|cuda]
+                 [--ablations] [--device cpu|cuda] [--scheduler ADDRESS]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
@@ -19,6 +19,7 @@ from pathlib import Path
 
 from zendar_dataset.cli.arguments import DEVICES, seed_count, whole_number
 from zendar_dataset.cli.common import run_cli
+from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, refuse_url_output, scheduler_address
 from zendar_dataset.errors import ZendarError
 
 from zendar_baselines.bench.configs import CONFIGS, get_config
@@ -62,6 +63,10 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         "as its static-scene test, and FPN ResNet-34 supervised-only trained on CFAR-gated targets, each "
                         "against its Table 1 row by paired intervals (ablations.md; adds the default run's 3 seeds of "
                         "one row)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="simulate the dataset's scenes on the Dask cluster of this scheduler (tcp://host:8786; "
+                        f"default: ${SCHEDULER_ENV} when set); the dataset's directory must be one every worker sees "
+                        "(docs/cluster.md); the results do not depend on it")
     _common(parser)
     parser.set_defaults(func=_bench)
 
@@ -138,9 +143,14 @@ def _bench(args: argparse.Namespace) -> int:
     _check_device(args.device)
     config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
     seeds = args.seeds or (1 if args.quick else config.seeds)
+    scheduler = scheduler_address(args.scheduler)
+    if scheduler is not None:
+        if args.data is not None:
+            refuse_url_output(args.data, "--data")
+        DaskCluster.connect(scheduler).close()  # it answers before anything is written
     data = None if args.data is None else Path(args.data).absolute()
     options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device, jobs=args.jobs,
-                           ablations=args.ablations)
+                           ablations=args.ablations, scheduler=scheduler)
     results = run_bench(options)
     if results.get("manual_labels") is False:
         print(f"wrote {Path(args.out) / 'table.md'}, results.json and rows/ (no manual labels: the steps that need none)")

@@ -68,6 +68,9 @@ class BenchOptions:
         usable CPU.
     ablations : bool
         ``--ablations``: also the rows of :mod:`zendar_baselines.bench.ablations`.
+    scheduler : str or None
+        ``--scheduler``: the Dask scheduler the dataset's scenes are simulated on (docs/cluster.md);
+        None for worker processes here.
     """
 
     config: BenchConfig
@@ -77,6 +80,7 @@ class BenchOptions:
     device: str
     jobs: int | None = None
     ablations: bool = False
+    scheduler: str | None = None
 
 
 def cache_root() -> Path:
@@ -108,7 +112,8 @@ def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex, bool]:
         # The simulator resumes its own interrupted run there and refuses a directory of other files.
         say(f"[data] simulating the {config.sim_profile} dataset ({config.n_scenes} scenes) into {root}")
         synthesize_dataset(root, profile=config.sim_profile, n_scenes=config.n_scenes, seed=config.sim_seed,
-                           progress=True, jobs=synthesis_jobs(config.n_scenes))
+                           progress=True, jobs=1 if options.scheduler else synthesis_jobs(config.n_scenes),
+                           scheduler=options.scheduler)
     index = open_dataset(str(root))
     if has_no_labels(index):
         return root, index, False

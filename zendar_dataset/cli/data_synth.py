@@ -6,6 +6,8 @@ import argparse
 
 from zendar_dataset.cli.arguments import DEVICES, split_ratios, whole_number
 from zendar_dataset.cli.common import writing
+from zendar_dataset.cluster import SCHEDULER_ENV, refuse_url_output, scheduler_address
+from zendar_dataset.errors import ZendarError
 from zendar_dataset.sim.profiles import PROFILES
 
 
@@ -52,6 +54,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="where SAR images are backprojected: cpu (numba kernel, default) or cuda (torch on the "
                         "GPU: the same sum, equal to rounding; recorded in OUT/simulation.json). Each worker "
                         "process holds its own GPU memory: lower --jobs if the GPU runs out")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run the scenes on the Dask cluster of this scheduler (tcp://host:8786; default: "
+                        f"${SCHEDULER_ENV} when set, else this machine), one task per scene; OUT must be a directory "
+                        "every worker sees at the same path (docs/cluster.md); the output does not depend on it")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=_run)
 
@@ -64,6 +70,16 @@ def _run(args: argparse.Namespace) -> int:
     if args.duration_s is not None:
         profile = profile.with_duration(args.duration_s)
     n_scenes = profile.default_scenes if args.scenes is None else args.scenes
+    scheduler = scheduler_address(args.scheduler)
+    if scheduler is not None:
+        refuse_url_output(args.out, "OUT")
+        if args.jobs is not None:
+            raise ZendarError(f"--jobs does not apply with a Dask scheduler ({scheduler}, from "
+                              f"{'--scheduler' if args.scheduler is not None else '$' + SCHEDULER_ENV}): "
+                              "its workers run the scenes; drop one of the two")
+        jobs = 1
+    else:
+        jobs = default_jobs(n_scenes) if args.jobs is None else args.jobs
     with writing(args.out):
         out = synthesize_dataset(
             args.out,
@@ -74,8 +90,9 @@ def _run(args: argparse.Namespace) -> int:
             backend=args.backend,
             progress=not args.quiet,
             withhold_test_labels=args.withhold_test_labels,
-            jobs=default_jobs(n_scenes) if args.jobs is None else args.jobs,
+            jobs=jobs,
             sar_device=args.device,
+            scheduler=scheduler,
         )
     print(f"wrote {out}")
     return 0

@@ -15,11 +15,16 @@ re-runs the caller's main script in each worker: a call at the top level of
 a script without an ``if __name__ == "__main__":`` guard is refused at once
 rather than started, and a worker that dies (at start-up or later) fails the
 run instead of being replaced.
+
+On a Dask cluster (``scheduler``, :mod:`zendar_dataset.cluster`) each scene is one task; a scene
+whose worker dies is simulated again on another worker, and the bytes are the same as here: a
+scene's random streams depend only on the seed and its index (:func:`zendar_dataset.sim.scene.stream_rng`).
 """
 
 from __future__ import annotations
 
 import ast
+import contextlib
 import json
 import numbers
 import os
@@ -29,6 +34,7 @@ from dataclasses import dataclass
 
 from tqdm import tqdm
 
+from zendar_dataset.cluster import DaskCluster, refuse_url_output
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, frame_id
 from zendar_dataset.atomic_files import write_json_atomic
@@ -118,9 +124,13 @@ def _prepare_output(out: pathlib.Path, settings: dict) -> None:
     write_json_atomic(sidecar, settings)
 
 
-def _remove_interrupted(out: pathlib.Path) -> None:
-    """Delete the temporary scene stores of writers that are gone (only this package's, see temporary_files.py)."""
-    remove_stale_temporaries(out / "scenes")
+def _remove_interrupted(out: pathlib.Path, cluster: DaskCluster | None = None) -> None:
+    """Delete the temporary scene stores of writers that are gone (only this package's, see temporary_files.py);
+    on a cluster, those of its live workers are kept too (their process ids are on other hosts)."""
+    if cluster is None:
+        remove_stale_temporaries(out / "scenes")
+    else:
+        cluster.remove_orphaned_temporaries(out / "scenes")
 
 
 class SceneSynthesisError(RuntimeError):
@@ -147,6 +157,7 @@ def synthesize_dataset(
     withhold_test_labels: bool = False,
     jobs: int = 1,
     sar_device: str | None = None,
+    scheduler: str | None = None,
 ) -> pathlib.Path:
     """Write a synthetic dataset to ``out`` (or finish an interrupted one).
 
@@ -177,6 +188,11 @@ def synthesize_dataset(
         Where SAR images are backprojected: the numba kernel on the CPU (``None``, ``"cpu"``) or
         the torch backend on a GPU, which computes the same float32 sum (equal to rounding, so
         not byte-identical to a CPU run; a GPU run is recorded in ``simulation.json``).
+    scheduler : str, optional
+        A Dask scheduler's address (``tcp://host:8786``): one task per scene on its workers instead
+        of ``jobs`` local processes (``jobs`` must then be 1). ``out`` must be a directory every worker
+        sees at the same path (checked; a URL is refused), and the scheduler must answer before
+        anything is written. The bytes are the same as without one (docs/cluster.md).
 
     Returns
     -------
@@ -187,7 +203,10 @@ def synthesize_dataset(
     ------
     ZendarError
         When ``out`` holds something else, or an argument is invalid, or
-        ``jobs > 1`` is asked from the top level of an unguarded main script.
+        ``jobs > 1`` is asked from the top level of an unguarded main script,
+        or ``out`` is a URL or a directory some worker of ``scheduler`` does not see.
+    zendar_dataset.cluster.ClusterUnavailable
+        When ``scheduler`` does not answer or has no worker (nothing written).
     SceneSynthesisError
         When simulating a scene fails or its worker process dies (the message
         names the scene and the cause). No scene is started after it; the ones
@@ -206,13 +225,29 @@ def synthesize_dataset(
     if isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 1:
         raise ZendarError(f"jobs must be a positive integer, got {jobs!r}")
     jobs = int(jobs)
+    if scheduler is not None:
+        refuse_url_output(out, "the output")
+        if jobs != 1:
+            raise ZendarError(f"jobs={jobs} does not apply with a Dask scheduler ({scheduler}): its workers run the scenes")
     sar_device = check_sar_device(sar_device)
     if jobs > 1:
         _refuse_unguarded_main(jobs)
     splits = split_scene_ids(n_scenes, split_ratios)
     out = pathlib.Path(out)
+    # Connected before the output is touched: a scheduler that does not answer leaves nothing behind.
+    cluster = None if scheduler is None else DaskCluster.connect(scheduler)
+    with cluster if cluster is not None else contextlib.nullcontext():
+        _synthesize_into(out, profile, n_scenes, seed, split_ratios, backend, progress, withhold_test_labels, jobs,
+                         sar_device, splits, cluster)
+    return out
+
+
+def _synthesize_into(out: pathlib.Path, profile: SimProfile, n_scenes: int, seed: int, split_ratios, backend: str,
+                     progress: bool, withhold_test_labels: bool, jobs: int, sar_device: str | None,
+                     splits: dict[str, list[str]], cluster: DaskCluster | None) -> None:
+    """:func:`synthesize_dataset` once its arguments are checked (and its cluster connected)."""
     _prepare_output(out, _settings(profile, n_scenes, seed, split_ratios, backend, withhold_test_labels, sar_device))
-    _remove_interrupted(out)
+    _remove_interrupted(out, cluster)
     writer = DatasetWriter(out, f"zendar-sim-{profile.name}", backend=backend, overwrite=True)
     test_ids = set(splits["test"])
     todo = []
@@ -225,7 +260,16 @@ def synthesize_dataset(
     with bar:
         cpus = usable_cpus()
         n_jobs = min(jobs, len(todo))
-        if n_jobs <= 1:
+        if cluster is not None and todo:
+            with cluster.shared_directory(out / "scenes") as shared:
+                cluster.run(
+                    _run_task, todo, shared=shared, on_done=lambda task, scene_id: bar.update(),
+                    worker_died=lambda task: SceneSynthesisError(
+                        task.scene_id, "the Dask workers running it died (killed, out of memory, or their node lost) "
+                        "as many times as the scheduler allows (distributed.scheduler.allowed-failures)"),
+                    # Workers stopped mid-scene leave hidden temporary stores, never a scene at its final path.
+                    on_interrupt=lambda: _remove_interrupted(out, cluster))
+        elif n_jobs <= 1:
             for task in todo:
                 _run_task(task)
                 bar.update()
@@ -242,7 +286,6 @@ def synthesize_dataset(
         for scene_id in splits["test"]:
             frames.update(json.loads((out / GROUND_TRUTH_DIR / f"{scene_id}.json").read_text(encoding="utf-8")))
         write_json_atomic(out / TEST_GROUND_TRUTH, {"frames": frames})
-    return out
 
 
 @dataclass(frozen=True)
