@@ -32,20 +32,12 @@ def _elements(payloads: list[bytes]) -> tuple[memoryview, np.ndarray, np.ndarray
     return memoryview(buf), offsets, lengths
 
 
-def _flatten(decoded: dict, prefix: str = ""):
-    for name, value in decoded.items():
-        if isinstance(value, dict):
-            yield from _flatten(value, f"{prefix}{name}.")
-        elif isinstance(value, (int, float)):
-            yield f"{prefix}{name}", value
-
-
 def _plain(element, buf, offsets, lengths, unknown):
     """Every element through ``wire.decode``, one at a time, into the column decoder's table layout."""
     names = column_table(element).names
     values = np.full((offsets.shape[0], len(names)), np.nan)
     for k, (offset, length) in enumerate(zip(offsets.tolist(), lengths.tolist())):
-        for name, value in _flatten(decode(element, buf, offset, offset + length, unknown)):
+        for name, value in rec._flatten(decode(element, buf, offset, offset + length, unknown)):
             values[k, names.index(name)] = value
     return values
 
