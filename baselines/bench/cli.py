@@ -1,7 +1,7 @@
 """Command line of ``zendar-bench``.
 
     zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
-                 [--ablations] [--device cpu|cuda] [--scheduler ADDRESS]
+                 [--ablations] [--device cpu|cuda] [--scheduler ADDRESS] [--allow-slow]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
     zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
@@ -21,8 +21,10 @@ from zendar_dataset.cli.arguments import DEVICES, seed_count, whole_number
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, refuse_url_output, scheduler_address
 from zendar_dataset.errors import ZendarError
+from zendar_dataset.worker_pool import usable_cpus
 
 from zendar_baselines.bench.configs import CONFIGS, get_config
+from zendar_baselines.bench.paper_guard import check_paper_config_fits
 
 DEFAULT_OUT = "zendar-bench-out"
 DEFAULT_CONFIG = "demo"
@@ -59,14 +61,18 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         "at most the seeds left; 1 = in this process, and always 1 with --device cuda); the results "
                         "do not depend on it")
     parser.add_argument("--ablations", action="store_true",
-                        help="also measure what two changes of the chain moved: the CFAR row with the SAR reading alone "
-                        "as its static-scene test, and FPN ResNet-34 supervised-only trained on CFAR-gated targets, each "
-                        "against its Table 1 row by paired intervals (ablations.md; adds the default run's 3 seeds of "
-                        "one row)")
+                        help="also measure what two changes of the chain moved and what optional input channels add: "
+                        "the CFAR row with the SAR reading alone as its static-scene test, and FPN ResNet-34 "
+                        "supervised-only trained on CFAR-gated targets, or with the antennas' phase differences, or "
+                        "with every cell's Doppler-test residual as extra input channels, each against its Table 1 row "
+                        "by paired intervals (ablations.md; adds 3 rows of the config's seeds)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="simulate the dataset's scenes on the Dask cluster of this scheduler (tcp://host:8786; "
                         f"default: ${SCHEDULER_ENV} when set); the dataset's directory must be one every worker sees "
                         "(docs/cluster.md); the results do not depend on it")
+    parser.add_argument("--allow-slow", action="store_true",
+                        help="run the paper config on this machine's CPUs alone (refused by default: its projected "
+                        "time, in the message, is weeks)")
     _common(parser)
     parser.set_defaults(func=_bench)
 
@@ -144,6 +150,7 @@ def _bench(args: argparse.Namespace) -> int:
     config = get_config(args.config or (QUICK_CONFIG if args.quick else DEFAULT_CONFIG))
     seeds = args.seeds or (1 if args.quick else config.seeds)
     scheduler = scheduler_address(args.scheduler)
+    check_paper_config_fits(config, args.device, scheduler, args.allow_slow, usable_cpus())
     if scheduler is not None:
         if args.data is not None:
             refuse_url_output(args.data, "--data")

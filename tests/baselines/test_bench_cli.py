@@ -233,8 +233,9 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     # The channel rows' models read their own inputs: 4 antennas' log power and 6 phase channels, or 1
     # residual channel, per map of the window; the reference row's the log power alone.
     window = json.loads((copy / "results.json").read_text())["config"]["window"]
+    channel_rows = {a["ablation"]: a["row"] for a in results["ablations"]}
     for name, per_map in (("phase-difference-channels", 10), ("static-doppler-channel", 5)):
-        meta = json.loads((copy / "ablations" / name / "seed-0" / "predictions.json").read_text())["meta"]
+        meta = json.loads((copy / channel_rows[name]["predictions"]).read_text())["meta"]
         assert meta["architecture"]["in_channels"] == window * per_map
         assert set(meta["architecture"]["inputs"].values()) == {True, False}
     meta = json.loads((copy / "rows" / "fpn-resnet34-supervised" / "predictions.json").read_text())["meta"]
