@@ -89,49 +89,10 @@ class StreamTimes:
 
 def median_interval_ns(timestamp_ns: np.ndarray) -> int | None:
     """Median spacing of a stream in ns (``int(np.median(np.diff(t)))``), or None with fewer than two elements."""
-    if len(timestamp_ns) < 2:
-        return None
-    return int(_median_consuming(np.diff(timestamp_ns)))
+    # Imported here: numba is paid for by the first index built, not by every import of the package.
+    from zendar_dataset.interval_median import median_interval_ns as compiled
 
-
-# Jittered intervals: one value in this many is sampled to bracket the middle ranks.
-_BRACKET_SAMPLE_STEP = 64
-
-
-def _median_consuming(values: np.ndarray) -> float:
-    """``np.median`` of a 1-D integer array that the caller gives up (it is reordered or shifted in place).
-
-    The default tolerances need every stream's median interval, which ``np.median``'s
-    partition of the whole array made the largest part of building the index
-    (benchmarks/bench_sync.py). Exact whatever the data:
-
-    - values that span less than their count (a fixed-rate clock such as the 100 Hz
-      tracklog, a few distinct intervals, on which a partition is slowest) are counted;
-    - otherwise (capture jitter) two quantiles of a 1-in-64 sample bracket the middle
-      ranks, which are selected among the bracketed values only (about a fifth);
-    - when the bracket misses them, the whole array is partitioned in place.
-    """
-    n = values.size
-    if n == 0:
-        return float(np.median(values))
-    smallest, largest = int(values.min()), int(values.max())
-    middle = [(n - 1) // 2, n // 2]
-    if largest - smallest < n:
-        values -= smallest
-        lower, upper = np.searchsorted(np.cumsum(np.bincount(values)), middle, side="right")
-        picked = [smallest + int(lower), smallest + int(upper)]
-    else:
-        sample = np.sort(values[::_BRACKET_SAMPLE_STEP])
-        low, high = sample[(4 * sample.size) // 10], sample[(6 * sample.size) // 10]
-        below = int(np.count_nonzero(values < low))
-        inside = values[(values >= low) & (values <= high)]
-        ranks = [rank - below for rank in middle]
-        if ranks[0] < 0 or ranks[1] >= inside.size:
-            inside, ranks = values, middle
-        inside.partition(ranks)
-        picked = [int(inside[rank]) for rank in ranks]
-    # As np.median: the mean of the two middle values in float64 (one value when n is odd).
-    return (float(picked[0]) + float(picked[1])) / 2
+    return compiled(timestamp_ns)
 
 
 def resolve_tolerances_ns(
@@ -208,12 +169,12 @@ def _nearest(reference_ns: np.ndarray, stream_ns: np.ndarray, tolerance_ns: int)
         to_before = reference_ns - stream_ns[before]  # negative only before the stream's first element
         dt_ns = stream_ns[after] - reference_ns  # negative only after its last
         take_before = to_before <= dt_ns
-        np.copyto(after, before, where=take_before)
-        np.negative(to_before, out=dt_ns, where=take_before)
-        index = after
+        # np.where, not a masked copyto / negative: the masked ufunc loops took a third of the call.
+        index = np.where(take_before, before, after)
+        dt_ns = np.where(take_before, -to_before, dt_ns)
     far = np.abs(dt_ns) > tolerance_ns
-    np.copyto(index, MISSING, where=far)
-    np.copyto(dt_ns, 0, where=far)
+    index[far] = MISSING
+    dt_ns[far] = 0
     return index, dt_ns
 
 

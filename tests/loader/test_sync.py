@@ -200,6 +200,11 @@ def _median_cases():
     yield "odd length", jittered[:100_001]
     yield "a fixed-rate clock's two intervals", rng.choice(np.array([9_999_872, 10_000_128]), 360_000)
     yield "few distinct values", rng.integers(-3, 3, 50_000)
+    clock = rng.choice(np.array([10_000_000 - 2048, 10_000_000, 10_000_000 + 2047]), 100_000)
+    clock[0] = 10_000_000  # the counting window is centred on the first interval: both ends are in it
+    yield "a fixed clock at the ends of the counted span", clock
+    yield "a fixed clock, its last interval one past the counted span", np.r_[clock[:-1], 10_000_000 + 2048]
+    yield "a fixed clock with one gap at the end", np.r_[np.full(99_999, 10_000_000), 20_000_000]
     yield "two plateaus", np.r_[np.zeros(5_000, np.int64), np.full(5_001, 10**12)]
     yield "sorted descending", np.sort(rng.integers(0, 2**40, 20_000))[::-1].copy()
     # Every sampled value (1 in 64) is an outlier: the sample's bracket misses the median.
@@ -211,9 +216,10 @@ def _median_cases():
 
 @pytest.mark.parametrize("case", list(_median_cases()), ids=lambda case: case[0])
 def test_median_interval_equals_numpy_median_of_the_intervals(case):
-    from zendar_dataset.sync import _median_consuming, median_interval_ns
+    from zendar_dataset.sync import median_interval_ns
 
-    _, values = case
-    assert _median_consuming(values.copy()) == np.median(values)
-    timestamps = np.cumsum(np.abs(values) + 1)
-    assert median_interval_ns(timestamps) == int(np.median(np.diff(timestamps)))
+    _, intervals = case
+    timestamps = np.r_[0, np.cumsum(intervals)].astype(np.int64)  # its intervals are exactly the case's
+    assert median_interval_ns(timestamps) == int(np.median(intervals))
+    assert median_interval_ns(timestamps[:2]) == int(intervals[0])
+    assert median_interval_ns(timestamps[:1]) is None
