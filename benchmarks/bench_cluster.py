@@ -1,7 +1,7 @@
 """Claim: scenes on a local Dask cluster (``zendar-data synth --scheduler``) come about as fast as on
 the package's own worker processes (``--jobs``), and Dask's cost per task is small beside a scene's.
 
-Run: python benchmarks/bench_cluster.py [--profile tiny] [--scenes 6] [--repeats 2] [--tasks 500]
+Run: python benchmarks/bench_cluster.py [--profile tiny] [--scenes 6] [--repeats 2] [--tasks 500] [--label-scenes 10]
 
 1. Scenes per hour: the same ``--scenes`` scenes of ``--profile`` (seed 0) written by
    :func:`synthesize_dataset` in this process (``jobs=1``), on 2 spawned worker processes
@@ -12,7 +12,11 @@ Run: python benchmarks/bench_cluster.py [--profile tiny] [--scenes 6] [--repeats
    each.
    Interleaved, ``--repeats`` times; each run writes a new directory, and every output is checked
    byte-identical to the first.
-2. Scheduling overhead per task: ``--tasks`` calls of a task that does nothing (``abs``) in this
+2. Automatic labels per hour (``zendar-bench autolabels --scheduler``): the training scenes of a dataset
+   of ``--profile`` (``--label-scenes`` scenes, seed 0) labelled by :func:`write_auto_labels` in this
+   process and on the 1- and 2-worker clusters, each run into a new store, every store checked
+   byte-identical (scene files and quality) to the one made in this process.
+3. Scheduling overhead per task: ``--tasks`` calls of a task that does nothing (``abs``) in this
    process, through ``run_in_workers`` on 2 processes (its pool's start included, as each run
    pays it), through :meth:`DaskCluster.run` on the 2-worker cluster (one task per worker thread
    in flight, a probe of the shared directory and the thread caps per task: what the package
@@ -31,8 +35,11 @@ import time
 from harness import Spread, interleaved, print_environment, print_load_after
 
 from zendar_dataset.cluster import DaskCluster
+from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim.generate import synthesize_dataset, usable_cpus
 from zendar_dataset.worker_pool import run_in_workers
+
+from zendar_baselines.bench.autolabels import write_auto_labels
 
 
 def _files(root: pathlib.Path) -> dict[str, bytes]:
@@ -80,6 +87,49 @@ def scenes_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: in
         print(f"| {name} | {spread.text('.1f')} | {rate.text('.0f')} |", flush=True)
 
 
+class _Labelling:
+    """One side of the automatic-labels table: each call labels the scenes into a new store."""
+
+    def __init__(self, work: pathlib.Path, name: str, root: pathlib.Path, scene_ids: list[str], address: str | None) -> None:
+        self.work, self.name, self.root, self.scene_ids, self.address = work, name, root, scene_ids, address
+        self.runs = 0
+        self.first: dict[str, bytes] | None = None
+
+    def __call__(self) -> None:
+        self.runs += 1
+        out = self.work / f"labels-{self.name}-{self.runs}"
+        with contextlib.ExitStack() as stack:
+            cluster = None if self.address is None else stack.enter_context(DaskCluster.connect(self.address))
+            write_auto_labels(open_dataset(self.root), self.scene_ids, out, cluster=cluster)
+        files = {name: data for name, data in _files(out).items() if not name.endswith("manifest.json")}
+        if self.first is None:
+            self.first = files
+        elif files != self.first:
+            raise SystemExit(f"{self.name}: run {self.runs} differs from its first")
+        shutil.rmtree(out)
+
+
+def labels_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: int, clusters: dict[str, str]) -> None:
+    root = work / "labelled-dataset"
+    synthesize_dataset(root, profile, n_scenes=n_scenes, seed=0, progress=False, jobs=min(2, usable_cpus()))
+    scene_ids = open_dataset(root).scene_ids("train")
+    sides = {"this process": _Labelling(work, "here", root, scene_ids, None)}
+    for index, (name, address) in enumerate(clusters.items()):
+        sides[name] = _Labelling(work, f"dask{index}", root, scene_ids, address)
+    times = interleaved(sides, repeats=repeats, warmup=1)
+    for name, side in sides.items():
+        if side.first != sides["this process"].first:
+            raise SystemExit(f"{name}: the automatic labels differ from the ones made in this process")
+    n = len(scene_ids)
+    print(f"\nautomatic labels of the {n} training scenes of {n_scenes} {profile!r} scenes (with their quality); "
+          f"byte-identical on every side; median (min-max) of {repeats}")
+    print("| where | wall time (s) | scenes per hour |")
+    print("|---|--:|--:|")
+    for name, spread in times.items():
+        rate = Spread(n * 3600 / spread.max, n * 3600 / spread.median, n * 3600 / spread.min, spread.repeats)
+        print(f"| {name} | {spread.text('.1f')} | {rate.text('.0f')} |", flush=True)
+
+
 def _dask_map(cluster: DaskCluster, n_tasks: int) -> None:
     futures = cluster.client.map(abs, range(-n_tasks, 0), pure=False)
     cluster.client.gather(futures)
@@ -112,6 +162,7 @@ def main() -> None:
     parser.add_argument("--scenes", type=int, default=6)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--tasks", type=int, default=500)
+    parser.add_argument("--label-scenes", type=int, default=10)
     args = parser.parse_args()
     from distributed import LocalCluster
 
@@ -128,6 +179,7 @@ def main() -> None:
             print(f"start-up of {name}: {time.perf_counter() - started:.1f} s")
             addresses[name] = cluster.scheduler_address
         scenes_per_hour(work, args.profile, args.scenes, args.repeats, addresses)
+        labels_per_hour(work, args.profile, args.label_scenes, args.repeats, addresses)
         with DaskCluster.connect(addresses["Dask, 2 workers x 1 thread"]) as cluster:
             overhead_per_task(work, cluster, args.tasks, args.repeats)
     print_load_after()

@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from zendar_baselines.bench import steps  # noqa: E402
+from zendar_baselines.bench.autolabels import write_auto_labels  # noqa: E402
 from zendar_baselines.bench.configs import Schedule, get_config  # noqa: E402
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels  # noqa: E402
 from zendar_baselines.bench.run_directory import RunDirectory  # noqa: E402
@@ -61,7 +62,7 @@ def main() -> None:
     inputs = context.step_inputs()
     split_dir, split_key, _ = run.step("split", inputs, lambda d: steps.write_semi_supervised_split(context, d))
     split = steps.read_semi_supervised_split(context, split_dir)
-    auto_dir, _, _ = run.step("autolabels", {**inputs, "split": split_key}, lambda d: steps.write_auto_labels(
+    auto_dir, _, _ = run.step("autolabels", {**inputs, "split": split_key}, lambda d: write_auto_labels(
         context.dataset, [*split.labelled, *split.unlabelled], d, quality=False))
     masks_dir, _, _ = run.step("label_masks", {**inputs, "split": split_key},
                                lambda d: steps.write_label_masks(context, split, d))

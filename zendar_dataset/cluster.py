@@ -347,6 +347,17 @@ class DaskCluster:
                 self.client.restart_workers(busy, timeout=RESTART_TIMEOUT_S, raise_for_error=False)
 
 
+@contextlib.contextmanager
+def connected(address: str | None) -> Iterator[DaskCluster | None]:
+    """The cluster of the scheduler at ``address`` (:meth:`DaskCluster.connect`) for the block, or None
+    without an address; disconnected when the block ends."""
+    if address is None:
+        yield None
+        return
+    with DaskCluster.connect(address) as cluster:
+        yield cluster
+
+
 def _threads_per_host(worker_threads: dict[str, int]) -> dict[str, int]:
     """Host -> the threads of the workers it runs, from worker address -> threads."""
     from distributed.comm import get_address_host
@@ -399,4 +410,5 @@ def _limit_blas_threads(threads: int) -> None:
         _THREAD_LIMIT = threads
 
 
-__all__ = ["SCHEDULER_ENV", "ClusterUnavailable", "DaskCluster", "SharedDirectory", "refuse_url_output", "scheduler_address"]
+__all__ = ["SCHEDULER_ENV", "ClusterUnavailable", "DaskCluster", "SharedDirectory", "connected", "refuse_url_output",
+           "scheduler_address"]

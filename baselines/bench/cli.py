@@ -3,7 +3,7 @@
     zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
                  [--ablations] [--device cpu|cuda] [--scheduler ADDRESS] [--allow-slow]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
-    zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality]
+    zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality] [--scheduler ADDRESS]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
 
 Without a command, ``zendar-bench`` is ``zendar-bench run``. Exit statuses as every command of the
@@ -19,10 +19,11 @@ from pathlib import Path
 
 from zendar_dataset.cli.arguments import DEVICES, seed_count, whole_number
 from zendar_dataset.cli.common import run_cli
-from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, refuse_url_output, scheduler_address
+from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, connected, refuse_url_output, scheduler_address
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.worker_pool import usable_cpus
 
+from zendar_baselines.bench import ranks
 from zendar_baselines.bench.configs import CONFIGS, get_config
 from zendar_baselines.bench.paper_guard import check_paper_config_fits
 
@@ -67,7 +68,8 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         "with every cell's Doppler-test residual as extra input channels, each against its Table 1 row "
                         "by paired intervals (ablations.md; adds 3 rows of the config's seeds)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="simulate the dataset's scenes on the Dask cluster of this scheduler (tcp://host:8786; "
+                        help="simulate and automatically label the dataset's scenes on the Dask cluster of this "
+                        "scheduler (tcp://host:8786; "
                         f"default: ${SCHEDULER_ENV} when set); the dataset's directory must be one every worker sees "
                         "(docs/cluster.md); the results do not depend on it")
     parser.add_argument("--allow-slow", action="store_true",
@@ -109,6 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
     autolabels.add_argument("--split", default="train", help="split to label (default: train)")
     autolabels.add_argument("--no-quality", action="store_true",
                             help="skip the comparison with the manual labels (needed for scenes without labels)")
+    autolabels.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                            help="label the scenes on the Dask cluster of this scheduler, one task per scene "
+                            f"(tcp://host:8786; default: ${SCHEDULER_ENV} when set); ROOT and --out must be directories "
+                            "every worker sees at the same path (docs/cluster.md); the labels do not depend on it")
     autolabels.set_defaults(func=_autolabels)
 
     fit_chain = commands.add_parser(
@@ -152,6 +158,7 @@ def _bench(args: argparse.Namespace) -> int:
     scheduler = scheduler_address(args.scheduler)
     check_paper_config_fits(config, args.device, scheduler, args.allow_slow, usable_cpus())
     if scheduler is not None:
+        refuse_url_output(args.out, "--out")  # the automatic labels' store is written by the workers
         if args.data is not None:
             refuse_url_output(args.data, "--data")
         DaskCluster.connect(scheduler).close()  # it answers before anything is written
@@ -159,6 +166,8 @@ def _bench(args: argparse.Namespace) -> int:
     options = BenchOptions(config=config, data=data, out=Path(args.out), seeds=seeds, device=args.device, jobs=args.jobs,
                            ablations=args.ablations, scheduler=scheduler)
     results = run_bench(options)
+    if not ranks.is_main():  # under torchrun: rank 0 wrote the run and says so
+        return 0
     if results.get("manual_labels") is False:
         print(f"wrote {Path(args.out) / 'table.md'}, results.json and rows/ (no manual labels: the steps that need none)")
     else:
@@ -177,7 +186,7 @@ def _verify(args: argparse.Namespace) -> int:
 
 def _autolabels(args: argparse.Namespace) -> int:
     from zendar_dataset.format.reader import open_dataset
-    from zendar_baselines.bench.steps import write_auto_labels
+    from zendar_baselines.bench.autolabels import write_auto_labels
 
     index = open_dataset(args.root)
     scene_ids = index.scene_ids(args.split)
@@ -188,7 +197,8 @@ def _autolabels(args: argparse.Namespace) -> int:
         if unlabelled:
             raise ZendarError(f"{args.root}: {', '.join(unlabelled)} of split {args.split!r} have no labels to "
                               "measure the automatic labels against; add --no-quality")
-    document = write_auto_labels(index, scene_ids, Path(args.out), quality=not args.no_quality)
+    with connected(scheduler_address(args.scheduler)) as cluster:  # it answers before anything is written
+        document = write_auto_labels(index, scene_ids, Path(args.out), quality=not args.no_quality, cluster=cluster)
     if document is not None:
         print(document["table"])
     print(f"wrote the automatic labels of {len(scene_ids)} scenes to {Path(args.out) / 'store'}")

@@ -32,11 +32,13 @@ from typing import TYPE_CHECKING, Any
 from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic, write_text_atomic
+from zendar_dataset.cluster import connected
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.report import read_metrics
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 from zendar_dataset.worker_pool import run_in_workers, usable_cpus
 
+from zendar_baselines.bench import ranks
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.results_table import METHOD_NAMES, Row, csv_table, markdown_table
@@ -69,7 +71,8 @@ class BenchOptions:
     ablations : bool
         ``--ablations``: also the rows of :mod:`zendar_baselines.bench.ablations`.
     scheduler : str or None
-        ``--scheduler``: the Dask scheduler the dataset's scenes are simulated on (docs/cluster.md);
+        ``--scheduler``: the Dask scheduler the dataset's scenes are simulated and automatically labelled on
+        (docs/cluster.md);
         None for worker processes here.
     """
 
@@ -137,15 +140,39 @@ def synthesis_jobs(n_scenes: int) -> int:
 
 def seed_jobs(requested: int | None, n_seeds: int, device: str) -> int:
     """Worker processes for the CNN seeds: ``requested`` (default: the usable CPUs), one per seed at
-    most, and one on a GPU (the seeds would share it)."""
-    if device != "cpu":
+    most, and one on a GPU (the seeds would share it) or under torchrun (the ranks train each seed together)."""
+    if device != "cpu" or ranks.current().world_size > 1:
         return 1
     return max(1, min(usable_cpus() if requested is None else requested, n_seeds))
 
 
 def run_bench(options: BenchOptions) -> dict[str, Any]:
-    """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content."""
+    """Run every step (reusing finished ones) and write the outputs; returns ``results.json``'s content.
+
+    Under torchrun, rank 0 does so and the other ranks train each CNN seed with it, write nothing and
+    return an empty dict (:mod:`zendar_baselines.bench.ranks`).
+    """
+    with ranks.process_group(options.device) as process:
+        if not process.is_main:
+            ranks.follow(_train_seed_here)
+            return {}
+        results = _run_bench(options)
+        if process.world_size > 1:
+            ranks.hand_out(None)  # the other ranks' run is over
+        return results
+
+
+def _train_seed_here(step: SeedStep) -> None:
+    """A rank other than 0: its part of training ``step``'s seed (its files are rank 0's to write)."""
+    from zendar_baselines.bench import steps
+
+    context = replace(step.context, progress=False)
+    steps.train_row(context, step.labels, step.row, Path(context.run_path) / step.name)
+
+
+def _run_bench(options: BenchOptions) -> dict[str, Any]:
     from zendar_baselines.bench import chain_step, scoring, steps
+    from zendar_baselines.bench.autolabels import write_auto_labels
 
     started = time.monotonic()
     config = options.config
@@ -153,6 +180,9 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     root, dataset, labelled = ensure_dataset(options)
     context = RunContext.open(root, config, options.out, options.device, dataset)
     if not labelled:
+        if ranks.current().world_size > 1:
+            raise ZendarError(f"{root}: has no manual labels; zendar-bench runs the steps that need none in one "
+                              "process (run it without torchrun)")
         from zendar_baselines.bench.unlabelled import run_unlabelled_bench
 
         return run_unlabelled_bench(context, options.seeds)
@@ -165,8 +195,11 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     say(f"[split] {n_segments} labelled time segments in {len(split.labelled)} training scenes "
         f"({len(split.unlabelled)} training scenes without one)")
 
-    auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "split": split_key},
-                                     lambda d: steps.write_auto_labels(dataset, [*split.labelled, *split.unlabelled], d))
+    def auto_labels(step_dir: Path) -> None:
+        with connected(options.scheduler) as cluster:
+            write_auto_labels(dataset, [*split.labelled, *split.unlabelled], step_dir, cluster=cluster)
+
+    auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "split": split_key}, auto_labels)
     quality = read_json(auto_dir / "quality.json")
     say("[autolabels] quality against the manual labels of the training scenes:\n" + quality["table"])
 
@@ -239,10 +272,15 @@ def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> 
             run.step(step.name, step.inputs, _never)  # says it is reused
         else:
             todo.append(step)
-    if jobs <= 1 or len(todo) <= 1:
+    distributed = ranks.current().world_size > 1
+    if distributed:
+        ranks.hand_out(todo)  # the other ranks train each of these seeds with this one
+    if jobs <= 1 or len(todo) <= 1 or distributed:
         with ScoringScenes(seed_steps[0].context.dataset) as test_scenes:
             for step in todo:
                 run.step(step.name, step.inputs, lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes))
+                if distributed:
+                    ranks.barrier()
         return
     # Longest first, so that the seeds left running alone at the end are short: pretrained seeds train
     # twice, and the later architectures of the config are the slower ones (a DenseNet-67 seed took

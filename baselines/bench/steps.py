@@ -1,6 +1,6 @@
 """The steps of ``zendar-bench`` (:mod:`zendar_baselines.bench.run`) before scoring, each writing into its
-step directory: the semi-supervised split, the automatic labels and their quality, the manual-label
-masks of the labelled part, and the training of one seed of one CNN row.
+step directory: the semi-supervised split, the manual-label masks of the labelled part (the automatic
+labels: :mod:`zendar_baselines.bench.autolabels`), and the training of one seed of one CNN row.
 
 Data flow: the training scenes' cubes become normalised log-power maps (memory-mapped ``.npy`` files,
 so the paper config never holds a split in memory); automatic masks of every training scene and
@@ -22,20 +22,16 @@ from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.format.reader import DatasetIndex, SceneReader
-from zendar_dataset.radar import FmcwParams, range_axis_m
-from zendar_dataset.sar.frames import SarFrames
+from zendar_dataset.format.reader import SceneReader
 from zendar_dataset.temporary_files import remove_temporary, temporary_sibling
 
+from zendar_baselines.bench import ranks
 from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
 from zendar_baselines.bench.run_directory import read_json
 from zendar_baselines.cnn.input_channels import InputChannels
-from zendar_baselines.code_version import code_version
-from zendar_baselines.fingerprints import dataset_index
 from zendar_baselines.labels.mask_classes import UNCERTAIN
 from zendar_baselines.labels.mask_store import MaskStore
 from zendar_baselines.labels.masks import MaskParams, scene_masks
-from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
 from zendar_baselines.labels.splits import SemiSupervisedSplit, make_split, read_split, write_split
 
 if TYPE_CHECKING:
@@ -46,8 +42,6 @@ if TYPE_CHECKING:
 SPLIT_FILE = "split.json"
 STORE_DIR = "store"
 CHECKPOINT_RECORD = "checkpoint.json"
-# The manual-label masks the automatic labels' quality is measured against (write_auto_labels).
-QUALITY_REFERENCE = MaskParams(manual_targets="cfar-peaks")
 CURVES_FILE = "curves.json"
 #: Without validation scenes: the share of each labelled scene's frames (its last ones) held out to
 #: choose the checkpoint.
@@ -81,57 +75,6 @@ def read_semi_supervised_split(run: RunContext, step_dir: Path) -> SemiSupervise
 
 
 # --- masks ---------------------------------------------------------------------------------------
-
-
-def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
-    n_range, n_doppler = masks.shape[1:]
-    params = FmcwParams.from_calibration(reader.calibration.sensors[radar], n_samples=n_range, n_chirps=n_doppler)
-    return range_axis_m(n_range, params.range_bin_m)
-
-
-def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list[str], out_dir: Path, *,
-                      quality: bool = True) -> dict[str, Any] | None:
-    """Automatic masks of ``scene_ids`` (a mask store in ``out_dir / "store"``) and their quality.
-
-    With ``quality``, every scene's masks are also measured against its manual-label masks and the
-    pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
-    labels, feed no model and choose nothing, so they may read the manual labels of any scene. The
-    reference is the CFAR-gated kind (``manual_targets="cfar-peaks"``), not the box targets the CNNs
-    train on: automatic labels are made from CFAR peaks, so the figures measure which of the peaks
-    on labelled cars they keep, and keep their meaning.
-
-    Parameters
-    ----------
-    dataset
-        The dataset root, or the dataset already opened.
-
-    Raises
-    ------
-    ZendarError
-        For ``quality`` on a scene without labels, or a store of another dataset in ``out_dir``.
-    """
-    index = dataset_index(dataset)
-    parameters = mask_parameters()
-    store = MaskStore.create(out_dir / STORE_DIR, index, parameters, code_version=code_version())
-    scores = []
-    for scene_id in tqdm(sorted(scene_ids), desc="automatic labels", unit="scene"):
-        with index.open_scene(scene_id) as reader:
-            if store.has_scene(scene_id, parameters, code_version()):
-                auto = store.scene(scene_id)
-            else:
-                sar = SarFrames(reader)
-                auto = {radar: scene_masks(reader, radar, "auto", sar=sar, progress=False) for radar in reader.sensors("radar")}
-                store.write_scene(scene_id, auto)
-            if quality:
-                for radar, (_, auto_masks) in auto.items():
-                    _, label_masks = scene_masks(reader, radar, "labels", params=QUALITY_REFERENCE, progress=False)
-                    scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
-    if not quality:
-        return None
-    pooled = combine_quality(scores)
-    document = {"quality": pooled, "table": format_quality(pooled)}
-    write_json_atomic(out_dir / "quality.json", document)
-    return document
 
 
 def write_label_masks(run: RunContext, split: SemiSupervisedSplit, step_dir: Path, params: MaskParams | None = None) -> None:
@@ -300,7 +243,8 @@ def train_row(run: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Pa
         model, labelled, schedule, seed=row.seed, out_dir=out_dir / phase, device=run.device, init_from=init_from,
         validation=validation, progress=run.progress,
         description=f"{row.model_name} {phase} seed {row.seed} ({parameter_count(model):,} parameters)")
-    write_training_records(out_dir, row, results, validation_record)
+    if ranks.is_main():  # under torchrun, the other ranks trained with this one and write nothing
+        write_training_records(out_dir, row, results, validation_record)
     return results[phase].checkpoint_path
 
 

@@ -56,7 +56,8 @@ def has_no_labels(index: DatasetIndex) -> bool:
 
 def write_auto_labels_with_statistics(dataset: DatasetIndex, scene_ids: list[str], step_dir: Path) -> None:
     """Automatic masks of ``scene_ids`` (a store in ``step_dir / "store"``) and :data:`STATISTICS_FILE`."""
-    from zendar_baselines.bench.steps import STORE_DIR, write_auto_labels
+    from zendar_baselines.bench.autolabels import write_auto_labels
+    from zendar_baselines.bench.steps import STORE_DIR
 
     write_auto_labels(dataset, scene_ids, step_dir, quality=False)
     write_json_atomic(step_dir / STATISTICS_FILE, label_statistics(step_dir / STORE_DIR, dataset))

@@ -260,6 +260,58 @@ def _radar_masks_problems(scene_id: str, radar_masks: Any) -> list[str]:
     return problems
 
 
+def _scene_problems(scene_id: Any, radar_masks: Any, dataset: tuple[str, frozenset[str]] | None) -> list[str]:
+    problems = []
+    if not _valid_name(scene_id):
+        problems.append(f"scene id: expected a name without '/' and not starting with '.', found {scene_id!r}")
+    elif dataset is not None and scene_id not in dataset[1]:
+        problems.append(f"scene {scene_id}: not a scene of the dataset {dataset[0]}")
+    return problems + _radar_masks_problems(str(scene_id), radar_masks)
+
+
+def write_scene_file(directory: str | os.PathLike, scene_id: str, radar_masks: Mapping[str, tuple[np.ndarray, np.ndarray]],
+                     dataset: tuple[str, frozenset[str]] | None = None) -> dict[str, Any]:
+    """Write one scene's masks to ``directory / "<scene_id>.npz"`` atomically; return its manifest entry.
+
+    The part of :meth:`MaskStore.write_scene` a worker on another host does: the file is complete at
+    its final name or absent, and the manifest, which one process writes, records it afterwards
+    (:meth:`MaskStore.record_scene`).
+
+    Parameters
+    ----------
+    directory
+        The store's directory.
+    scene_id
+        The scene's id (its file name).
+    radar_masks
+        As :meth:`MaskStore.write_scene`.
+    dataset
+        ``(root, scene ids)``: the scene must be one of them.
+
+    Returns
+    -------
+    dict
+        ``{"file", "sha256", "radars"}``, the scene's entry in the manifest.
+
+    Raises
+    ------
+    MaskStoreError
+        Listing every problem with the scene id or the arrays; nothing is written then.
+    """
+    _raise_problems(_scene_problems(scene_id, radar_masks, dataset))
+    arrays, radars = {}, {}
+    for radar, (timestamp_ns, masks) in radar_masks.items():
+        arrays[f"{radar}/timestamp_ns"] = np.asarray(timestamp_ns, dtype=np.int64)
+        arrays[f"{radar}/masks"] = np.ascontiguousarray(masks)
+        radars[radar] = {"n_frames": int(masks.shape[0]), "shape": [int(n) for n in masks.shape]}
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    data = buffer.getvalue()
+    path = Path(directory) / f"{scene_id}{SCENE_SUFFIX}"
+    write_bytes_atomic(path, data)
+    return {"file": path.name, "sha256": hashlib.sha256(data).hexdigest(), "radars": radars}
+
+
 class MaskStore:
     """Automatic labels of a dataset's scenes, one ``.npz`` file per scene and a manifest.
 
@@ -506,29 +558,26 @@ class MaskStore:
         MaskStoreError
             Listing every problem with the scene id or the arrays; nothing is written then.
         """
-        problems = []
-        if not _valid_name(scene_id):
-            problems.append(f"scene id: expected a name without '/' and not starting with '.', found {scene_id!r}")
-        elif self._dataset_scene_ids is not None and scene_id not in self._dataset_scene_ids:
-            problems.append(f"scene {scene_id}: not a scene of the dataset {self.manifest['dataset']['root']}")
-        problems += _radar_masks_problems(str(scene_id), radar_masks)
-        _raise_problems(problems)
-        arrays, radars = {}, {}
-        for radar, (timestamp_ns, masks) in radar_masks.items():
-            arrays[f"{radar}/timestamp_ns"] = np.asarray(timestamp_ns, dtype=np.int64)
-            arrays[f"{radar}/masks"] = np.ascontiguousarray(masks)
-            radars[radar] = {"n_frames": int(masks.shape[0]), "shape": [int(n) for n in masks.shape]}
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, **arrays)
-        data = buffer.getvalue()
-        path = self.scene_path(scene_id)
-        write_bytes_atomic(path, data)
-        self.manifest["scenes"][scene_id] = {
-            "file": path.name,
-            "sha256": hashlib.sha256(data).hexdigest(),
-            "radars": radars,
-        }
+        self.record_scene(scene_id, write_scene_file(self.directory, scene_id, radar_masks, self._dataset))
+
+    def record_scene(self, scene_id: str, entry: dict[str, Any]) -> None:
+        """Record a scene file written by :func:`write_scene_file` (on any host) in the manifest, atomically.
+
+        Raises
+        ------
+        MaskStoreError
+            When ``scene_id`` is not a scene of the store's dataset.
+        """
+        if self._dataset is not None and scene_id not in self._dataset[1]:
+            raise MaskStoreError(f"scene {scene_id}: not a scene of the dataset {self._dataset[0]}")
+        self.manifest["scenes"][scene_id] = entry
         self._write_manifest()
+
+    @property
+    def _dataset(self) -> tuple[str, frozenset[str]] | None:
+        if self._dataset_scene_ids is None:
+            return None
+        return self.manifest["dataset"]["root"], self._dataset_scene_ids
 
     def scene(self, scene_id: str) -> RadarMasks:
         """One scene's masks, after checking the file's SHA-256 and arrays against the manifest.
@@ -568,4 +617,5 @@ __all__ = [
     "MaskStore",
     "MaskStoreError",
     "check_manifest",
+    "write_scene_file",
 ]

@@ -24,7 +24,6 @@ scene's random streams depend only on the seed and its index (:func:`zendar_data
 from __future__ import annotations
 
 import ast
-import contextlib
 import json
 import numbers
 import os
@@ -34,7 +33,7 @@ from dataclasses import dataclass
 
 from tqdm import tqdm
 
-from zendar_dataset.cluster import DaskCluster, refuse_url_output
+from zendar_dataset.cluster import DaskCluster, connected, refuse_url_output
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, frame_id
 from zendar_dataset.atomic_files import write_json_atomic
@@ -235,8 +234,7 @@ def synthesize_dataset(
     splits = split_scene_ids(n_scenes, split_ratios)
     out = pathlib.Path(out)
     # Connected before the output is touched: a scheduler that does not answer leaves nothing behind.
-    cluster = None if scheduler is None else DaskCluster.connect(scheduler)
-    with cluster if cluster is not None else contextlib.nullcontext():
+    with connected(scheduler) as cluster:
         _synthesize_into(out, profile, n_scenes, seed, split_ratios, backend, progress, withhold_test_labels, jobs,
                          sar_device, splits, cluster)
     return out

@@ -1,0 +1,192 @@
+"""The ``autolabels`` step of ``zendar-bench`` (and ``zendar-bench autolabels``): the automatic masks of
+a list of scenes in a mask store, one task per scene, in this process or on a Dask cluster.
+
+A task (:func:`label_scene`) opens its scene, makes every radar's automatic masks, writes the scene's
+file into the store atomically (on whichever host runs it: the store must be a directory every worker
+sees at the same path) and returns the file's manifest entry, with the masks' quality against the
+manual labels when asked. Only this process writes the manifest (:meth:`MaskStore.record_scene`), in
+the order the tasks finish; the masks do not depend on where or in which order they were made.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.cluster import DaskCluster, refuse_url_output
+from zendar_dataset.errors import ZendarError
+from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
+from zendar_dataset.format.stores import is_url
+from zendar_dataset.radar import FmcwParams, range_axis_m
+from zendar_dataset.sar.frames import SarFrames
+
+from zendar_baselines.bench.steps import STORE_DIR, mask_parameters
+from zendar_baselines.code_version import code_version
+from zendar_baselines.fingerprints import dataset_index
+from zendar_baselines.labels.mask_store import MaskStore, RadarMasks, write_scene_file
+from zendar_baselines.labels.masks import MaskParams, scene_masks
+from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
+
+QUALITY_FILE = "quality.json"
+# The manual-label masks the automatic labels' quality is measured against (write_auto_labels).
+QUALITY_REFERENCE = MaskParams(manual_targets="cfar-peaks")
+
+
+def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
+    n_range, n_doppler = masks.shape[1:]
+    params = FmcwParams.from_calibration(reader.calibration.sensors[radar], n_samples=n_range, n_chirps=n_doppler)
+    return range_axis_m(n_range, params.range_bin_m)
+
+
+def _quality(reader: SceneReader, auto: RadarMasks) -> list[dict[str, Any]]:
+    """Each radar's automatic masks against the scene's CFAR-gated manual-label masks."""
+    scores = []
+    for radar, (_, auto_masks) in auto.items():
+        _, label_masks = scene_masks(reader, radar, "labels", params=QUALITY_REFERENCE, progress=False)
+        scores.append(mask_quality(auto_masks, label_masks, _range_m(reader, radar, auto_masks)))
+    return scores
+
+
+@dataclass(frozen=True)
+class AutoLabelTask:
+    """One scene to label (picklable: it travels to a worker process or a Dask worker).
+
+    Attributes
+    ----------
+    root : str
+        The dataset's root (a path every worker sees, or an fsspec URL).
+    storage_options : dict
+        The dataset's fsspec options.
+    scene_id : str
+    store_dir : pathlib.Path
+        The mask store's directory.
+    quality : bool
+        Also measure the masks against the scene's manual labels.
+    """
+
+    root: str
+    storage_options: dict = field(hash=False)
+    scene_id: str
+    store_dir: Path
+    quality: bool
+
+
+@dataclass(frozen=True)
+class LabelledScene:
+    """What a task returns: the scene file's manifest entry and, with quality, one result per radar."""
+
+    entry: dict[str, Any]
+    scores: list[dict[str, Any]]
+
+
+def label_scene(task: AutoLabelTask) -> LabelledScene:
+    """Make, write and (optionally) measure one scene's automatic masks (module docstring).
+
+    Raises
+    ------
+    ZendarError
+        When this host cannot read the dataset (naming the host), or the scene has no labels to
+        measure against.
+    """
+    try:
+        index = open_dataset(task.root, task.storage_options)
+    except (OSError, ZendarError) as exc:
+        raise ZendarError(f"{task.scene_id}: the dataset {task.root} cannot be read on host {socket.gethostname()} "
+                          f"({exc}); every worker must see it at the same path or URL") from None
+    with index.open_scene(task.scene_id) as reader:
+        sar = SarFrames(reader)
+        auto = {radar: scene_masks(reader, radar, "auto", sar=sar, progress=False) for radar in reader.sensors("radar")}
+        entry = write_scene_file(task.store_dir, task.scene_id, auto)
+        return LabelledScene(entry, _quality(reader, auto) if task.quality else [])
+
+
+def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list[str], out_dir: Path, *,
+                      quality: bool = True, cluster: DaskCluster | None = None) -> dict[str, Any] | None:
+    """Automatic masks of ``scene_ids`` (a mask store in ``out_dir / "store"``) and their quality.
+
+    With ``quality``, every scene's masks are also measured against its manual-label masks and the
+    pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
+    labels, feed no model and choose nothing, so they may read the manual labels of any scene. The
+    reference is the CFAR-gated kind (``manual_targets="cfar-peaks"``), not the box targets the CNNs
+    train on: automatic labels are made from CFAR peaks, so the figures measure which of the peaks
+    on labelled cars they keep, and keep their meaning.
+
+    Parameters
+    ----------
+    dataset
+        The dataset root, or the dataset already opened.
+    scene_ids
+        The scenes to label; those already in the store (same parameters and code) are kept.
+    out_dir
+        Where the store and ``quality.json`` go.
+    quality
+        Measure the masks against the manual labels.
+    cluster
+        A connected Dask cluster: the scenes to label are one task each on its workers (``out_dir``
+        must be a directory they all see; checked). Without one, they are labelled in this process.
+
+    Raises
+    ------
+    ZendarError
+        For ``quality`` on a scene without labels, a store of another dataset in ``out_dir``, an
+        ``out_dir`` some worker does not see, or a scene whose workers died.
+    """
+    index = dataset_index(dataset)
+    parameters = mask_parameters()
+    if cluster is not None:
+        refuse_url_output(out_dir, "the automatic labels")
+    store = MaskStore.create(out_dir / STORE_DIR, index, parameters, code_version=code_version())
+    # Absolute: a worker on another host has another working directory.
+    root = str(index.root) if is_url(index.root) else str(Path(index.root).absolute())
+    store_dir = Path(store.directory).absolute()
+    scores: list[dict[str, Any]] = []
+    todo = []
+    with tqdm(total=len(scene_ids), desc="automatic labels", unit="scene") as bar:
+        for scene_id in sorted(scene_ids):
+            if not store.has_scene(scene_id, parameters, code_version()):
+                todo.append(AutoLabelTask(root, dict(index.storage_options), scene_id, store_dir, quality))
+                continue
+            if quality:
+                with index.open_scene(scene_id) as reader:
+                    scores += _quality(reader, store.scene(scene_id))
+            bar.update()
+
+        def done(task: AutoLabelTask, labelled: LabelledScene) -> None:
+            store.record_scene(task.scene_id, labelled.entry)
+            scores.extend(labelled.scores)
+            bar.update()
+
+        if cluster is None:
+            for task in todo:
+                done(task, label_scene(task))
+        elif todo:
+            cluster.remove_orphaned_temporaries(store_dir)
+            with cluster.shared_directory(store_dir) as shared:
+                cluster.run(label_scene, todo, shared=shared, on_done=done,
+                            worker_died=lambda task: ZendarError(
+                                f"{task.scene_id}: the Dask workers labelling it died (killed, out of memory, or their "
+                                "node lost) as many times as the scheduler allows (distributed.scheduler.allowed-failures)"),
+                            # Workers stopped mid-scene leave hidden temporaries, never a scene file at its final name.
+                            on_interrupt=lambda: _remove_orphans(cluster, store_dir))
+    if not quality:
+        return None
+    pooled = combine_quality(scores)
+    document = {"quality": pooled, "table": format_quality(pooled)}
+    write_json_atomic(out_dir / QUALITY_FILE, document)
+    return document
+
+
+def _remove_orphans(cluster: DaskCluster, directory: Path) -> None:
+    with contextlib.suppress(OSError):
+        cluster.remove_orphaned_temporaries(directory)
+
+
+__all__ = ["AutoLabelTask", "LabelledScene", "QUALITY_REFERENCE", "label_scene", "write_auto_labels"]
