@@ -152,6 +152,12 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
     Under torchrun, rank 0 does so and the other ranks train each CNN seed with it, write nothing and
     return an empty dict (:mod:`zendar_baselines.bench.ranks`).
     """
+    world_size = ranks.current().world_size
+    uneven = {phase: getattr(options.config, phase).batch_size for phase in ("pretrain", "finetune", "supervised")
+              if getattr(options.config, phase).batch_size % world_size}
+    if uneven:
+        raise ZendarError(f"config {options.config.name}: the batch sizes {uneven} do not divide over torchrun's "
+                          f"{world_size} ranks; run on a number of ranks that divides each of them")
     with ranks.process_group(options.device) as process:
         if not process.is_main:
             ranks.follow(_train_seed_here)
