@@ -1,5 +1,5 @@
-"""Scenes on a Dask cluster (``--scheduler``): the same bytes as in one process, a worker lost mid-scene
-costs nothing but time, Ctrl-C leaves no half-written scene, a scheduler that does not answer (or has no
+"""Scenes on a Dask cluster (``--scheduler``), simulated or automatically labelled: the same bytes as in one
+process, a worker lost mid-scene costs nothing but time, Ctrl-C leaves no half-written scene, a scheduler that does not answer (or has no
 worker) and a URL output are refused before anything is written, and a worker that cannot see the output
 or run the package is named."""
 
@@ -24,11 +24,16 @@ from zendar_dataset.cli import data as data_cli  # noqa: E402
 from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, SharedDirectory  # noqa: E402
 from zendar_dataset.errors import ZendarError  # noqa: E402
 from zendar_dataset.sim import generate  # noqa: E402
+from zendar_dataset.temporary_files import temporary_sibling  # noqa: E402
+
+from zendar_baselines.bench import autolabels  # noqa: E402
+from zendar_baselines.bench.cli import main as bench_main  # noqa: E402
 
 SYNTH = ["--profile", "tiny", "--scenes", "4", "--duration-s", "0.5", "--quiet"]
 REPO = pathlib.Path(__file__).resolve().parents[1]
 # The worker processes' own simulation, captured before any test replaces the client's.
 _RUN_TASK = generate._run_task
+_LABEL_SCENE = autolabels.label_scene
 
 
 @pytest.fixture(autouse=True)
@@ -226,8 +231,6 @@ def test_a_scheduler_without_workers_stops_the_command_before_anything_is_writte
 
 
 def test_the_bench_checks_its_scheduler_before_writing_anything(tmp_path, monkeypatch, capsys):
-    from zendar_baselines.bench.cli import main as bench_main
-
     monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT_S", 1.0)
     address = _unanswered_address()
     argv = ["--quick", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "run"), "--scheduler", address]
@@ -256,8 +259,6 @@ def test_the_bench_simulates_its_dataset_through_the_scheduler(tmp_path, monkeyp
 
 @pytest.mark.parametrize("command", ["synth", "bench"])
 def test_a_url_output_is_refused_with_a_cluster(tmp_path, monkeypatch, capsys, command):
-    from zendar_baselines.bench.cli import main as bench_main
-
     monkeypatch.setenv(SCHEDULER_ENV, _unanswered_address())  # never reached: the URL is refused first
     if command == "synth":
         status = data_cli.main(["synth", "s3://bucket/out", *SYNTH])
@@ -273,6 +274,95 @@ def test_jobs_and_a_scheduler_exclude_each_other(tmp_path, monkeypatch, capsys):
     assert data_cli.main(["synth", str(tmp_path / "out"), *SYNTH, "--jobs", "2"]) == 2
     assert "--jobs does not apply with a Dask scheduler" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+# --- automatic labels (zendar-bench autolabels --scheduler) ---------------------------------------
+
+
+@pytest.fixture(scope="module")
+def labelled_dataset(tmp_path_factory) -> pathlib.Path:
+    root = tmp_path_factory.mktemp("autolabels") / "data"
+    assert data_cli.main(["synth", str(root), "--profile", "tiny", "--scenes", "5", "--duration-s", "0.5", "--quiet"]) == 0
+    return root
+
+
+@pytest.fixture(scope="module")
+def labels_reference(labelled_dataset, tmp_path_factory) -> dict[str, object]:
+    """The automatic labels of the training split made in this process, without a cluster."""
+    out = tmp_path_factory.mktemp("reference") / "labels"
+    assert bench_main(["autolabels", str(labelled_dataset), "--out", str(out)]) == 0
+    return _outputs(out)
+
+
+def _outputs(out: pathlib.Path) -> dict[str, object]:
+    store = out / "store"
+    manifest = json.loads((store / "manifest.json").read_text(encoding="utf-8"))
+    return {
+        "scene files": {path.name: path.read_bytes() for path in sorted(store.glob("*.npz"))},
+        "manifest scenes": manifest["scenes"],
+        "quality": (out / "quality.json").read_bytes(),
+    }
+
+
+def _store_temporaries(out: pathlib.Path) -> list[str]:
+    return [path.name for path in (out / "store").iterdir() if ".tmp-" in path.name]
+
+
+def _labelled_in(directory: str, task):
+    """On a worker: label the scene, leaving a file named for the process that did it."""
+    pathlib.Path(directory, f"{task.scene_id}-{os.getpid()}").touch()
+    return _LABEL_SCENE(task)
+
+
+def test_the_cluster_writes_the_same_store_and_quality_as_one_process(scheduler, labelled_dataset, labels_reference,
+                                                                     tmp_path, monkeypatch):
+    monkeypatch.setenv(SCHEDULER_ENV, scheduler)  # as --scheduler, when the flag is absent
+    where = tmp_path / "where"
+    where.mkdir()
+    monkeypatch.setattr(autolabels, "label_scene", functools.partial(_labelled_in, str(where)))
+    out = tmp_path / "labels"
+    assert bench_main(["autolabels", str(labelled_dataset), "--out", str(out)]) == 0
+    outputs = _outputs(out)
+    assert len(outputs["scene files"]) >= 2
+    assert outputs == labels_reference
+    assert _store_temporaries(out) == []
+    tasks = sorted(path.name.rsplit("-", 1) for path in where.iterdir())
+    assert [scene for scene, _ in tasks] == sorted(name.removesuffix(".npz") for name in outputs["scene files"])
+    assert str(os.getpid()) not in {pid for _, pid in tasks}  # every scene was labelled by a worker
+
+
+def _die_mid_write_on_first_attempt(marker: str, task):
+    """On a worker: the first attempt at the first scene leaves a half-written scene file under its
+    temporary name and dies (``os._exit``); every other attempt labels as usual."""
+    if not os.path.exists(marker):
+        open(marker, "x").close()
+        with open(temporary_sibling(task.store_dir / f"{task.scene_id}.npz"), "wb") as half:
+            half.write(b"PK\x03\x04 half a scene")
+        os._exit(1)
+    return _LABEL_SCENE(task)
+
+
+def test_a_worker_lost_mid_scene_is_replaced_and_the_store_is_the_same(scheduler, labelled_dataset, labels_reference,
+                                                                       tmp_path, monkeypatch):
+    marker = tmp_path / "first-attempt"
+    monkeypatch.setattr(autolabels, "label_scene", functools.partial(_die_mid_write_on_first_attempt, str(marker)))
+    out = tmp_path / "labels"
+    assert bench_main(["autolabels", str(labelled_dataset), "--out", str(out), "--scheduler", scheduler]) == 0
+    assert marker.exists()  # the worker did die
+    assert _outputs(out) == labels_reference
+    assert _store_temporaries(out) == []
+
+
+def test_a_scheduler_that_does_not_answer_stops_autolabels_before_anything_is_written(labelled_dataset, tmp_path,
+                                                                                     monkeypatch, capsys):
+    monkeypatch.setattr(cluster_module, "CONNECT_TIMEOUT_S", 1.0)
+    address = _unanswered_address()
+    out = tmp_path / "new" / "labels"
+    assert bench_main(["autolabels", str(labelled_dataset), "--out", str(out), "--scheduler", address]) == 1
+    message = capsys.readouterr().err.strip()
+    assert message.startswith(f"error: the Dask scheduler at {address} did not answer within 1 s")
+    assert "Traceback" not in message
+    assert not (tmp_path / "new").exists()
 
 
 def test_ctrl_c_stops_the_workers_and_removes_their_temporaries(scheduler, tmp_path):
