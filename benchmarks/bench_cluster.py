@@ -46,24 +46,39 @@ def _files(root: pathlib.Path) -> dict[str, bytes]:
     return {str(path.relative_to(root)): path.read_bytes() for path in sorted(root.rglob("*")) if path.is_file()}
 
 
-class _Synthesis:
-    """One side of the scenes-per-hour table: each call writes the scenes into a new directory."""
+class _Side:
+    """One side of a timed table: each call writes into a new directory, checked equal to its first."""
 
-    def __init__(self, work: pathlib.Path, name: str, profile: str, n_scenes: int, **options) -> None:
-        self.work, self.name, self.profile, self.n_scenes, self.options = work, name, profile, n_scenes, options
+    def __init__(self, work: pathlib.Path, name: str) -> None:
+        self.work, self.name = work, name
         self.runs = 0
         self.first: dict[str, bytes] | None = None
+
+    def write(self, out: pathlib.Path) -> dict[str, bytes]:
+        """Write into ``out``; return the files to compare."""
+        raise NotImplementedError
 
     def __call__(self) -> None:
         self.runs += 1
         out = self.work / f"{self.name}-{self.runs}"
-        synthesize_dataset(out, self.profile, n_scenes=self.n_scenes, seed=0, progress=False, **self.options)
-        files = _files(out)
+        files = self.write(out)
         if self.first is None:
             self.first = files
         elif files != self.first:
             raise SystemExit(f"{self.name}: run {self.runs} differs from its first")
         shutil.rmtree(out)
+
+
+class _Synthesis(_Side):
+    """The scenes-per-hour table's side: the scenes of ``profile`` written with ``options``."""
+
+    def __init__(self, work: pathlib.Path, name: str, profile: str, n_scenes: int, **options) -> None:
+        super().__init__(work, name)
+        self.profile, self.n_scenes, self.options = profile, n_scenes, options
+
+    def write(self, out: pathlib.Path) -> dict[str, bytes]:
+        synthesize_dataset(out, self.profile, n_scenes=self.n_scenes, seed=0, progress=False, **self.options)
+        return _files(out)
 
 
 def scenes_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: int, clusters: dict[str, str]) -> None:
@@ -79,6 +94,11 @@ def scenes_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: in
         if side.first != reference:
             raise SystemExit(f"{name}: the scenes differ from the ones written in this process")
     print(f"\n{n_scenes} {profile!r} scenes, seed 0; byte-identical on every side; median (min-max) of {repeats}")
+    _print_rates(times, n_scenes)
+
+
+def _print_rates(times: dict[str, Spread], n_scenes: int) -> None:
+    """The table of each side's wall time and scenes per hour."""
     print("| where | wall time (s) | scenes per hour |")
     print("|---|--:|--:|")
     for name, spread in times.items():
@@ -87,26 +107,19 @@ def scenes_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: in
         print(f"| {name} | {spread.text('.1f')} | {rate.text('.0f')} |", flush=True)
 
 
-class _Labelling:
-    """One side of the automatic-labels table: each call labels the scenes into a new store."""
+class _Labelling(_Side):
+    """The automatic-labels table's side: the scenes labelled here or on the cluster at ``address``."""
 
     def __init__(self, work: pathlib.Path, name: str, root: pathlib.Path, scene_ids: list[str], address: str | None) -> None:
-        self.work, self.name, self.root, self.scene_ids, self.address = work, name, root, scene_ids, address
-        self.runs = 0
-        self.first: dict[str, bytes] | None = None
+        super().__init__(work, f"labels-{name}")
+        self.root, self.scene_ids, self.address = root, scene_ids, address
 
-    def __call__(self) -> None:
-        self.runs += 1
-        out = self.work / f"labels-{self.name}-{self.runs}"
+    def write(self, out: pathlib.Path) -> dict[str, bytes]:
         with contextlib.ExitStack() as stack:
             cluster = None if self.address is None else stack.enter_context(DaskCluster.connect(self.address))
             write_auto_labels(open_dataset(self.root), self.scene_ids, out, cluster=cluster)
-        files = {name: data for name, data in _files(out).items() if not name.endswith("manifest.json")}
-        if self.first is None:
-            self.first = files
-        elif files != self.first:
-            raise SystemExit(f"{self.name}: run {self.runs} differs from its first")
-        shutil.rmtree(out)
+        # The manifest holds its creation time and the order the scenes finished in.
+        return {name: data for name, data in _files(out).items() if not name.endswith("manifest.json")}
 
 
 def labels_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: int, clusters: dict[str, str]) -> None:
@@ -123,11 +136,7 @@ def labels_per_hour(work: pathlib.Path, profile: str, n_scenes: int, repeats: in
     n = len(scene_ids)
     print(f"\nautomatic labels of the {n} training scenes of {n_scenes} {profile!r} scenes (with their quality); "
           f"byte-identical on every side; median (min-max) of {repeats}")
-    print("| where | wall time (s) | scenes per hour |")
-    print("|---|--:|--:|")
-    for name, spread in times.items():
-        rate = Spread(n * 3600 / spread.max, n * 3600 / spread.median, n * 3600 / spread.min, spread.repeats)
-        print(f"| {name} | {spread.text('.1f')} | {rate.text('.0f')} |", flush=True)
+    _print_rates(times, n)
 
 
 def _dask_map(cluster: DaskCluster, n_tasks: int) -> None:
