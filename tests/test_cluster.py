@@ -332,14 +332,15 @@ def test_the_cluster_writes_the_same_store_and_quality_as_one_process(scheduler,
 
 
 def _die_mid_write_on_first_attempt(marker: str, task):
-    """On a worker: the first attempt at the first scene leaves a half-written scene file under its
-    temporary name and dies (``os._exit``); every other attempt labels as usual."""
-    if not os.path.exists(marker):
-        open(marker, "x").close()
-        with open(temporary_sibling(task.store_dir / f"{task.scene_id}.npz"), "wb") as half:
-            half.write(b"PK\x03\x04 half a scene")
-        os._exit(1)
-    return _LABEL_SCENE(task)
+    """On a worker: the first attempt at any scene leaves a half-written scene file under its temporary
+    name and dies (``os._exit``); every other attempt labels as usual."""
+    try:
+        open(marker, "x").close()  # the two workers may try at once: one creates it, and that one dies
+    except FileExistsError:
+        return _LABEL_SCENE(task)
+    with open(temporary_sibling(task.store_dir / f"{task.scene_id}.npz"), "wb") as half:
+        half.write(b"PK\x03\x04 half a scene")
+    os._exit(1)
 
 
 def test_a_worker_lost_mid_scene_is_replaced_and_the_store_is_the_same(scheduler, labelled_dataset, labels_reference,

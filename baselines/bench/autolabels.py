@@ -33,11 +33,9 @@ from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_index
 from zendar_baselines.labels.mask_store import MaskStore, RadarMasks, write_scene_file
 from zendar_baselines.labels.masks import MaskParams, scene_masks
-from zendar_baselines.labels.quality import combine_quality, format_quality, mask_quality
+from zendar_baselines.labels.quality import QUALITY_REFERENCE, combine_quality, format_quality, mask_quality
 
 QUALITY_FILE = "quality.json"
-# The manual-label masks the automatic labels' quality is measured against (write_auto_labels).
-QUALITY_REFERENCE = MaskParams(manual_targets="cfar-peaks")
 
 
 def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
@@ -70,6 +68,8 @@ class AutoLabelTask:
         The mask store's directory.
     quality : bool
         Also measure the masks against the scene's manual labels.
+    params : MaskParams
+        The automatic labels' settings.
     """
 
     root: str
@@ -77,6 +77,7 @@ class AutoLabelTask:
     scene_id: str
     store_dir: Path
     quality: bool
+    params: MaskParams
 
 
 @dataclass(frozen=True)
@@ -103,21 +104,21 @@ def label_scene(task: AutoLabelTask) -> LabelledScene:
                           f"({exc}); every worker must see it at the same path or URL") from None
     with index.open_scene(task.scene_id) as reader:
         sar = SarFrames(reader)
-        auto = {radar: scene_masks(reader, radar, "auto", sar=sar, progress=False) for radar in reader.sensors("radar")}
+        auto = {radar: scene_masks(reader, radar, "auto", sar=sar, params=task.params, progress=False)
+                for radar in reader.sensors("radar")}
         entry = write_scene_file(task.store_dir, task.scene_id, auto)
         return LabelledScene(entry, _quality(reader, auto) if task.quality else [])
 
 
 def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list[str], out_dir: Path, *,
-                      quality: bool = True, cluster: DaskCluster | None = None) -> dict[str, Any] | None:
+                      quality: bool = True, cluster: DaskCluster | None = None,
+                      params: MaskParams | None = None) -> dict[str, Any] | None:
     """Automatic masks of ``scene_ids`` (a mask store in ``out_dir / "store"``) and their quality.
 
     With ``quality``, every scene's masks are also measured against its manual-label masks and the
     pooled figures are written to ``out_dir / "quality.json"`` (and returned). They describe the
     labels, feed no model and choose nothing, so they may read the manual labels of any scene. The
-    reference is the CFAR-gated kind (``manual_targets="cfar-peaks"``), not the box targets the CNNs
-    train on: automatic labels are made from CFAR peaks, so the figures measure which of the peaks
-    on labelled cars they keep, and keep their meaning.
+    reference is :data:`zendar_baselines.labels.quality.QUALITY_REFERENCE` (CFAR-gated masks).
 
     Parameters
     ----------
@@ -132,6 +133,8 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
     cluster
         A connected Dask cluster: the scenes to label are one task each on its workers (``out_dir``
         must be a directory they all see; checked). Without one, they are labelled in this process.
+    params
+        The automatic labels' settings (default :class:`MaskParams`), recorded in the store.
 
     Raises
     ------
@@ -140,7 +143,8 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
         ``out_dir`` some worker does not see, or a scene whose workers died.
     """
     index = dataset_index(dataset)
-    parameters = mask_parameters()
+    params = MaskParams() if params is None else params
+    parameters = mask_parameters(params)
     if cluster is not None:
         refuse_url_output(out_dir, "the automatic labels")
     store = MaskStore.create(out_dir / STORE_DIR, index, parameters, code_version=code_version())
@@ -152,7 +156,7 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
     with tqdm(total=len(scene_ids), desc="automatic labels", unit="scene") as bar:
         for scene_id in sorted(scene_ids):
             if not store.has_scene(scene_id, parameters, code_version()):
-                todo.append(AutoLabelTask(root, dict(index.storage_options), scene_id, store_dir, quality))
+                todo.append(AutoLabelTask(root, dict(index.storage_options), scene_id, store_dir, quality, params))
                 continue
             if quality:
                 with index.open_scene(scene_id) as reader:
@@ -189,4 +193,4 @@ def _remove_orphans(cluster: DaskCluster, directory: Path) -> None:
         cluster.remove_orphaned_temporaries(directory)
 
 
-__all__ = ["AutoLabelTask", "LabelledScene", "QUALITY_REFERENCE", "label_scene", "write_auto_labels"]
+__all__ = ["AutoLabelTask", "LabelledScene", "label_scene", "write_auto_labels"]

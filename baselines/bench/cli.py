@@ -3,7 +3,7 @@
     zendar-bench [run] [--quick] [--config tiny|demo|gpu|paper] [--data DIR] [--out DIR] [--seeds N] [--jobs N]
                  [--ablations] [--device cpu|cuda] [--scheduler ADDRESS] [--allow-slow]
     zendar-bench verify [--out DIR] [--device cpu|cuda]
-    zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality] [--scheduler ADDRESS]
+    zendar-bench autolabels ROOT --out DIR [--split S] [--no-quality] [--threshold-db DB] [--scheduler ADDRESS]
     zendar-bench fit-chain ROOT [--split S] [--sweep]
 
 Without a command, ``zendar-bench`` is ``zendar-bench run``. Exit statuses as every command of the
@@ -20,6 +20,7 @@ from pathlib import Path
 from zendar_dataset.cli.arguments import DEVICES, seed_count, whole_number
 from zendar_dataset.cli.common import run_cli
 from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, connected, refuse_url_output, scheduler_address
+from zendar_dataset.detection.static_scene import DEFAULT_THRESHOLD_DB as SAR_THRESHOLD_DB
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.worker_pool import usable_cpus
 
@@ -111,6 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
     autolabels.add_argument("--split", default="train", help="split to label (default: train)")
     autolabels.add_argument("--no-quality", action="store_true",
                             help="skip the comparison with the manual labels (needed for scenes without labels)")
+    autolabels.add_argument("--threshold-db", type=float, default=None, metavar="DB",
+                            help="the SAR static-scene test's threshold: a point is dynamic below it (default: "
+                            f"{SAR_THRESHOLD_DB:g} dB, docs/baselines.md); recorded in the store")
     autolabels.add_argument("--scheduler", default=None, metavar="ADDRESS",
                             help="label the scenes on the Dask cluster of this scheduler, one task per scene "
                             f"(tcp://host:8786; default: ${SCHEDULER_ENV} when set); ROOT and --out must be directories "
@@ -187,6 +191,7 @@ def _verify(args: argparse.Namespace) -> int:
 def _autolabels(args: argparse.Namespace) -> int:
     from zendar_dataset.format.reader import open_dataset
     from zendar_baselines.bench.autolabels import write_auto_labels
+    from zendar_baselines.labels.masks import MaskParams
 
     index = open_dataset(args.root)
     scene_ids = index.scene_ids(args.split)
@@ -198,7 +203,8 @@ def _autolabels(args: argparse.Namespace) -> int:
             raise ZendarError(f"{args.root}: {', '.join(unlabelled)} of split {args.split!r} have no labels to "
                               "measure the automatic labels against; add --no-quality")
     with connected(scheduler_address(args.scheduler)) as cluster:  # it answers before anything is written
-        document = write_auto_labels(index, scene_ids, Path(args.out), quality=not args.no_quality, cluster=cluster)
+        document = write_auto_labels(index, scene_ids, Path(args.out), quality=not args.no_quality, cluster=cluster,
+                                     params=MaskParams().with_sar_threshold(args.threshold_db))
     if document is not None:
         print(document["table"])
     print(f"wrote the automatic labels of {len(scene_ids)} scenes to {Path(args.out) / 'store'}")

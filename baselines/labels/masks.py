@@ -45,7 +45,7 @@ body's own returns.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.ndimage
@@ -56,6 +56,7 @@ from zendar_baselines.labels.mask_classes import BACKGROUND, MASK_DTYPE, MOVING,
 from zendar_dataset.detection import (
     ON_CAR_MARGIN_M,
     ChainParams,
+    CubePoints,
     LabelBoxes,
     RadarCells,
     cfar_map,
@@ -157,6 +158,12 @@ class MaskParams:
         if problems:
             raise ZendarError("invalid MaskParams: " + "; ".join(problems))
 
+    def with_sar_threshold(self, threshold_db: float | None) -> MaskParams:
+        """These settings with the SAR static-scene test's threshold at ``threshold_db`` (None: unchanged)."""
+        if threshold_db is None:
+            return self
+        return replace(self, chain=replace(self.chain, sar=replace(self.chain.sar, threshold_db=threshold_db)))
+
 
 def grow_segments(
     power_db: np.ndarray, seed_range_bin: np.ndarray, seed_doppler_bin: np.ndarray, drop_db: float, *,
@@ -224,6 +231,49 @@ def _paint(mask: np.ndarray, power_db: np.ndarray, floor_db: np.ndarray, range_b
         mask[grow_segments(power_db, range_bin, doppler_bin, params.drop_db, floor_db=floor_db, half_window=params.half_window)] = value
 
 
+@dataclass(frozen=True)
+class AutoLabelPoints:
+    """One cube's points and the automatic labels' verdict on each (:func:`auto_label_points`).
+
+    Attributes
+    ----------
+    points : CubePoints
+        The chain's points of the cube's CFAR peaks (DOA, SAR test).
+    cluster_size : numpy.ndarray
+        ``[N]`` int: the number of points in each point's cluster.
+    moving, uncertain : numpy.ndarray
+        ``[N]`` bool: the point's cluster is all dynamic (its segment is MOVING), or mixes dynamic and
+        not-dynamic points (UNCERTAIN).
+    power_db, floor_db : numpy.ndarray
+        ``[R, D]`` the cube's power and CFAR noise estimate, dB (the segments grow in them).
+    """
+
+    points: CubePoints
+    cluster_size: np.ndarray
+    moving: np.ndarray
+    uncertain: np.ndarray
+    power_db: np.ndarray
+    floor_db: np.ndarray
+
+
+def auto_label_points(
+    cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses, sar: SarFrames, params: MaskParams | None = None
+) -> AutoLabelPoints:
+    """The automatic labels' verdict on each CFAR peak of one cube (module docstring), before the
+    segments are grown. Parameters as :func:`auto_label_mask`."""
+    params = MaskParams() if params is None else params
+    cells, power_db, floor_db = _power_db_and_floor(cube, params)
+    points = cube_points(cube, cells, timestamp_ns, calibration, poses, sar, params.chain)
+    if len(points) == 0:
+        none = np.zeros(0, bool)
+        return AutoLabelPoints(points, np.zeros(0, np.int64), none, none, power_db, floor_db)
+    clusters = cluster_labels(points.points_ego[:, :2], params.chain.cluster_eps_m)
+    n_dynamic = np.bincount(clusters, weights=points.dynamic.astype(np.float64))
+    n_points = np.bincount(clusters)
+    return AutoLabelPoints(points, n_points[clusters], (n_dynamic == n_points)[clusters],
+                           ((n_dynamic > 0) & (n_dynamic < n_points))[clusters], power_db, floor_db)
+
+
 def auto_label_mask(
     cube: np.ndarray, timestamp_ns: int, calibration, poses: EgoPoses, sar: SarFrames, params: MaskParams | None = None
 ) -> np.ndarray:
@@ -249,18 +299,11 @@ def auto_label_mask(
         ``[R, D]`` uint8 of the classes of :mod:`zendar_baselines.labels.mask_classes`.
     """
     params = MaskParams() if params is None else params
-    cells, power_db, floor_db = _power_db_and_floor(cube, params)
-    points = cube_points(cube, cells, timestamp_ns, calibration, poses, sar, params.chain)
-    mask = np.full(power_db.shape, BACKGROUND, MASK_DTYPE)
-    if len(points) == 0:
-        return mask
-    clusters = cluster_labels(points.points_ego[:, :2], params.chain.cluster_eps_m)
-    n_dynamic = np.bincount(clusters, weights=points.dynamic.astype(np.float64))
-    n_points = np.bincount(clusters)
-    all_dynamic = (n_dynamic == n_points)[clusters]
-    mixed = ((n_dynamic > 0) & (n_dynamic < n_points))[clusters]
-    _paint(mask, power_db, floor_db, points.range_bin[all_dynamic], points.doppler_bin[all_dynamic], MOVING, params)
-    _paint(mask, power_db, floor_db, points.range_bin[mixed], points.doppler_bin[mixed], UNCERTAIN, params)
+    labelled = auto_label_points(cube, timestamp_ns, calibration, poses, sar, params)
+    mask = np.full(labelled.power_db.shape, BACKGROUND, MASK_DTYPE)
+    points = labelled.points
+    for verdict, value in ((labelled.moving, MOVING), (labelled.uncertain, UNCERTAIN)):
+        _paint(mask, labelled.power_db, labelled.floor_db, points.range_bin[verdict], points.doppler_bin[verdict], value, params)
     return mask
 
 

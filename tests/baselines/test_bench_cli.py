@@ -384,6 +384,28 @@ def test_autolabels_command_writes_a_side_store_with_its_quality(small_dataset, 
     assert again.returncode == 0 and json.loads((out / "store" / "manifest.json").read_text())["scenes"] == manifest["scenes"]
 
 
+def test_autolabels_at_another_sar_threshold_are_recorded_and_call_more_points_moving(small_dataset, tmp_path):
+    """A higher threshold calls more points dynamic (the test is "dynamic below it"): at 200 dB every point
+    with a SAR reading is, so the automatic labels hold at least as many MOVING cells as at the default,
+    and the store records the threshold it was made with."""
+    default, high = tmp_path / "default", tmp_path / "high"
+    assert bench("autolabels", str(small_dataset), "--out", str(default), env_home=tmp_path, timeout=300).returncode == 0
+    done = bench("autolabels", str(small_dataset), "--out", str(high), "--threshold-db", "200", env_home=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    parameters = json.loads((high / "store" / "manifest.json").read_text())["parameters"]
+    assert parameters["chain"]["sar"]["threshold_db"] == 200.0
+
+    def moving_cells(out):
+        counts = json.loads((out / "quality.json").read_text())["quality"]["bands"]["all"]["counts"]
+        return counts["tp_cells"] + counts["fp_cells"]
+
+    assert moving_cells(high) > moving_cells(default) > 0
+    bad = bench("autolabels", str(small_dataset), "--out", str(tmp_path / "bad"), "--threshold-db", "nan",
+                env_home=tmp_path, timeout=120)
+    assert bad.returncode == 2 and "threshold_db must be a finite number of dB" in bad.stderr
+    assert not (tmp_path / "bad").exists()
+
+
 def test_autolabels_are_never_written_inside_the_dataset(small_dataset, tmp_path):
     before = sorted(p.relative_to(small_dataset) for p in small_dataset.rglob("*"))
     done = bench("autolabels", str(small_dataset), "--out", str(small_dataset / "labels"), env_home=tmp_path, timeout=120)
