@@ -123,10 +123,13 @@ def complex_buffer(i: int, j: int, rng: np.random.Generator, row_major: bool = F
     return _flat(image, row_major)
 
 
-def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool = False, row_major: bool = False) -> Truth:
+def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool = False, row_major: bool = False,
+                  tracklog_axes: np.ndarray | None = None) -> Truth:
     """Write ``root/2020-02-03_2252/001/`` with every stream kind; returns what was written.
 
     ``row_major`` lays SAR pixels out as flat index i*COLS + j instead of the SDK's j*ROWS + i.
+    ``tracklog_axes``: the tracklog's attitudes rotate these axes (given in forward-right-down, as
+    columns) into ECEF instead of the IMU's own, e.g. ``diag(1, -1, -1)`` for x forward, y left, z up.
     """
     rng = np.random.default_rng(7)
     scene = root / "2020-02-03_2252" / "001"
@@ -163,7 +166,8 @@ def build_release(root: pathlib.Path, generation: str = "2020", gzip_lidar: bool
     poses = []
     for k, t in enumerate(np.arange(-0.2, 2.2, 0.02)):
         p_enu, R_ecef_imu, _ = vehicle(float(t))
-        poses.append(enc.position_record(T0_S + float(t), wxyz(R_ecef_imu), enu_to_ecef(p_enu), k))
+        attitude = R_ecef_imu if tracklog_axes is None else R_ecef_imu @ tracklog_axes
+        poses.append(enc.position_record(T0_S + float(t), wxyz(attitude), enu_to_ecef(p_enu), k))
         truth.tracklog_s.append(T0_S + float(t))
     enc.write_stream(scene / "vn200.pbs", poses, header=True)
     sweeps = []

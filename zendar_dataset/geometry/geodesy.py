@@ -67,6 +67,24 @@ def ecef_to_geodetic(position_ecef: ArrayLike) -> tuple[np.ndarray, np.ndarray, 
     return np.asarray(lat, np.float64), np.asarray(lon, np.float64), np.asarray(h, np.float64)
 
 
+def local_up_ecef(position_ecef: ArrayLike) -> np.ndarray:
+    """The WGS-84 ellipsoid's outward normal (the local vertical, "up") at ECEF positions.
+
+    Parameters
+    ----------
+    position_ecef
+        ``[..., 3]`` metres.
+
+    Returns
+    -------
+    np.ndarray
+        ``[..., 3]`` float64 unit vectors, ECEF axes.
+    """
+    lat_deg, lon_deg, _ = ecef_to_geodetic(position_ecef)
+    lat, lon = np.radians(lat_deg), np.radians(lon_deg)
+    return np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+
+
 class LocalENU:
     """A local east-north-up frame tangent to the WGS-84 ellipsoid at a geodetic origin.
 

@@ -34,6 +34,7 @@ from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish
 from zendar_dataset.release.discover import SceneSource, find_scenes, fingerprint
 from zendar_dataset.release.pixel_order import vote_pixel_order
 from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
+from zendar_dataset.release.tracklog_attitude import attitude_evidence, check_attitude
 from zendar_dataset.release.wire import WireError
 
 
@@ -132,18 +133,31 @@ class _SceneImport:
         )
 
     def decide_sides(self, stated: Mapping[str, str]) -> None:
-        """Serial -> side (``release/sides.py``), decided for every scene before any is written.
+        """Serial -> side (``release/sides.py``), and the tracklog's attitude convention checked against
+        the path (``release/tracklog_attitude.py``), for every scene before any is written.
 
-        Raises :class:`ZendarFormatError` when the image attitude and the path driven disagree.
+        Raises :class:`ZendarFormatError` when the image attitude and the path driven disagree, or
+        the tracklog's attitude is not the convention the import takes.
         """
         images = self._keyed(self._by_kind("Image"), "_images", report=False)
         points = self._keyed(self._by_kind("TrackerState"), "_points", report=False)
         tracklogs = self._by_kind("Position")
-        path = side_evidence.tracklog_path(tracklogs[0]) if tracklogs else None
+        path = None
+        if tracklogs:
+            seconds, position, attitude = side_evidence.tracklog_poses(tracklogs[0])
+            path = side_evidence.tracklog_path(seconds, position)
+            self._check_tracklog_attitude(seconds, position, attitude)
         if path is None:
             path = side_evidence.frames_path(itertools.chain.from_iterable(_sar_frames(o, probe=True) for o in images.values()))
         evidence = side_evidence.gather_evidence(images, points, path, lambda opened: _sar_frames(opened, probe=True))
         self.sides = side_evidence.decide_sides(self.source.scene_id, evidence, stated, self.summary.assumptions)
+
+    def _check_tracklog_attitude(self, seconds: np.ndarray, position: np.ndarray, attitude: np.ndarray) -> None:
+        usable = np.isfinite(seconds) & np.all(np.isfinite(position), axis=1) & np.all(np.isfinite(attitude), axis=1)
+        usable &= np.linalg.norm(np.where(np.isfinite(attitude), attitude, 0.0), axis=1) > 0
+        times_s, first = np.unique(seconds[usable], return_index=True)
+        evidence = attitude_evidence(times_s, position[usable][first], attitude[usable][first])
+        self.summary.assumptions.append(check_attitude(self.source.scene_id, *evidence))
 
     def _by_kind(self, name: str) -> list[OpenedStream]:
         return [o for o in self.opened if o.stream is not None and o.stream.kind.name == name and o.stream.kind.converted]

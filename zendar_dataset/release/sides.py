@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from zendar_dataset.errors import ZendarError, ZendarFormatError
-from zendar_dataset.geometry import ecef_to_geodetic, quat_wxyz_to_matrix
+from zendar_dataset.geometry import local_up_ecef, quat_wxyz_to_matrix
 from zendar_dataset.release import records as rec
 from zendar_dataset.release.decoded import OpenedStream, decoded_records
 from zendar_dataset.release.wire import WireError
@@ -159,23 +159,25 @@ class EgoPath:
         if end - start <= 0 or distance < MIN_SPEED_MPS * (end - start):
             return None
         here = self._at(t)
-        lat, lon, _ = (float(np.asarray(v).reshape(-1)[0]) for v in ecef_to_geodetic(here.reshape(1, 3)))
-        lat, lon = np.radians(lat), np.radians(lon)
-        up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
-        left = np.cross(up, travel / distance)
+        left = np.cross(local_up_ecef(here), travel / distance)
         return float(np.median((points - here) @ left))
 
 
-def tracklog_path(opened: OpenedStream) -> EgoPath | None:
-    """The path of a ``Position`` stream (read here without touching its summary), or None without positions."""
+def tracklog_poses(opened: OpenedStream) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ``Position`` stream's ``[K]`` GPS seconds, ``[K, 3]`` ECEF positions and ``[K, 4]`` wxyz
+    attitudes (read here without touching its summary; NaN where absent)."""
     _, offsets, lengths = opened.stream.spans()
     try:
-        seconds, position, _ = rec.poses(opened.stream.buffer, offsets, lengths, {})
+        return rec.poses(opened.stream.buffer, offsets, lengths, {})
     except WireError:
         decoded = [rec.pose(record) for record in decoded_records(opened, probe=True)]
-        seconds = np.array([d.timestamp_s for d in decoded])
-        position = np.array([d.position_ecef for d in decoded]).reshape(-1, 3)
-    path = EgoPath(seconds, position)
+        return (np.array([d.timestamp_s for d in decoded]), np.array([d.position_ecef for d in decoded]).reshape(-1, 3),
+                np.array([d.attitude_wxyz for d in decoded]).reshape(-1, 4))
+
+
+def tracklog_path(seconds: np.ndarray, position_ecef: np.ndarray) -> EgoPath | None:
+    """The path of a tracklog's poses (:func:`tracklog_poses`), or None with fewer than two positions."""
+    path = EgoPath(seconds, position_ecef)
     return path if path.times_s.size >= 2 else None
 
 
