@@ -34,6 +34,7 @@ import sys
 import numpy as np
 from sklearn.metrics import roc_auc_score
 
+from zendar_dataset.cli.common import run_cli
 from zendar_dataset.detection import (
     ON_CAR_MARGIN_M,
     ChainParams,
@@ -209,17 +210,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("root", help="dataset root")
     parser.add_argument("--splits", default="train,val", help="comma-separated splits (default: train,val)")
     args = parser.parse_args(argv)
-    try:
+
+    def tables() -> None:
         for split in args.splits.split(","):
             table = auc_table(candidate_values(args.root, split))
             print(f"\nsplit {split}\n\n| candidate | " + " | ".join((*RANGE_BANDS, ALL_BAND)) + " |")
             print("|---|" + "---:|" * (len(RANGE_BANDS) + 1))
             for name, row in table.items():
                 print(f"| {name} | " + " | ".join("-" if v is None else f"{v:.3f}" for v in row.values()) + " |")
-    except ZendarError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    return 0
+
+    return run_cli(tables)
 
 
 if __name__ == "__main__":

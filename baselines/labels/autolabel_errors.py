@@ -26,14 +26,20 @@ from collections import defaultdict
 
 import numpy as np
 
-from zendar_dataset.detection import LabelBoxes, frame_timestamps, nearest_label_frame
+from zendar_dataset.cli.common import run_cli
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.labels.mask_classes import BACKGROUND, MOVING
-from zendar_baselines.labels.masks import DEFAULT_MAX_VELOCITY_ERROR_MPS, MaskParams, auto_label_points, label_mask
+from zendar_baselines.labels.masks import (
+    DEFAULT_MAX_VELOCITY_ERROR_MPS,
+    MaskParams,
+    auto_label_points,
+    cubes_with_boxes,
+    label_mask,
+)
 from zendar_baselines.labels.quality import QUALITY_REFERENCE
 
 #: CFAR scores (linear power over the noise estimate) that split the on-car points into rows.
@@ -52,13 +58,10 @@ def point_table(root: str, split: str, params: MaskParams, reference: MaskParams
             labels = reader.labels()
             if labels is None:
                 continue
-            sar, poses, frames_ns = SarFrames(reader), reader.ego_poses(), frame_timestamps(reader)
+            sar, poses = SarFrames(reader), reader.ego_poses()
             for radar in reader.sensors("radar"):
                 calibration = reader.calibration.sensors[radar]
-                cubes = reader.array(f"radar/{radar}/cube")
-                for k, cube_ns in enumerate(reader.timestamps(f"radar/{radar}").tolist()):
-                    cube = np.asarray(cubes[k])
-                    boxes = LabelBoxes.of_frame(labels, nearest_label_frame(frames_ns, cube_ns)).moved_to(cube_ns, poses)
+                for cube_ns, cube, boxes in cubes_with_boxes(reader, radar, labels, poses):
                     labelled = auto_label_points(cube, cube_ns, calibration, poses, sar, params)
                     points = labelled.points
                     xy = points.points_ego[:, :2]
@@ -112,13 +115,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--split", default="train", help="split to read (default: train)")
     parser.add_argument("--threshold-db", type=float, default=None, help="the SAR test's threshold (default: the package's)")
     args = parser.parse_args(argv)
-    try:
-        params = MaskParams().with_sar_threshold(args.threshold_db)
-        print(error_report(point_table(args.root, args.split, params, QUALITY_REFERENCE)))
-    except ZendarError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
-    return 0
+    params = MaskParams().with_sar_threshold(args.threshold_db)
+    return run_cli(lambda: print(error_report(point_table(args.root, args.split, params, QUALITY_REFERENCE))))
 
 
 if __name__ == "__main__":

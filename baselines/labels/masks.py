@@ -45,6 +45,7 @@ body's own returns.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -417,6 +418,16 @@ def cfar_peak_label_mask(
     _paint(mask, power_db, floor_db, cells.range_bin[near_car], cells.doppler_bin[near_car], UNCERTAIN, params)
     _paint(mask, power_db, floor_db, cells.range_bin[on_car], cells.doppler_bin[on_car], MOVING, params)
     return mask
+
+
+def cubes_with_boxes(reader: SceneReader, radar: str, labels: dict[str, np.ndarray],
+                     poses: EgoPoses) -> Iterator[tuple[int, np.ndarray, LabelBoxes]]:
+    """Each cube of one radar, in time order: ``(timestamp_ns, cube [R, D, A], boxes)``, the boxes those
+    of the label frame nearest the cube's time moved to it (ego poses and each car's velocity)."""
+    frames_ns = frame_timestamps(reader)
+    cubes = reader.array(f"radar/{radar}/cube")
+    for k, cube_ns in enumerate(reader.timestamps(f"radar/{radar}").tolist()):
+        yield cube_ns, np.asarray(cubes[k]), LabelBoxes.of_frame(labels, nearest_label_frame(frames_ns, cube_ns)).moved_to(cube_ns, poses)
 
 
 def scene_masks(

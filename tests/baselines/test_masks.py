@@ -16,11 +16,12 @@ from zendar_baselines.labels.masks import (
     auto_label_mask,
     box_label_mask,
     cfar_peak_label_mask,
+    cubes_with_boxes,
     cfar_peaks_on_boxes,
     grow_segments,
     scene_masks,
 )
-from zendar_dataset.detection import LabelBoxes, cfar_map, cube_power, frame_timestamps, nearest_label_frame
+from zendar_dataset.detection import LabelBoxes, cfar_map, cube_power
 from zendar_dataset.detection.static_scene import SarTestParams
 from zendar_dataset.detection.locate import locate_cells
 from zendar_dataset.errors import ZendarError
@@ -167,13 +168,10 @@ def test_box_targets_hold_the_simulated_cars_returns_and_the_cells_cfar_missed(t
     peaks = {"all": 0, "covered": 0, "moving": 0}
     moving_cells = {"boxes": 0, "cfar-peaks": 0}
     with index.open_scene(scene_id) as reader:
-        poses, labels, frames_ns = reader.ego_poses(), reader.labels(), frame_timestamps(reader)
+        poses, labels = reader.ego_poses(), reader.labels()
         for radar in reader.sensors("radar"):
             calibration = reader.calibration.sensors[radar]
-            cubes = reader.array(f"radar/{radar}/cube")
-            for k, cube_ns in enumerate(reader.timestamps(f"radar/{radar}").tolist()):
-                cube = np.asarray(cubes[k])
-                boxes = LabelBoxes.of_frame(labels, nearest_label_frame(frames_ns, cube_ns)).moved_to(cube_ns, poses)
+            for cube_ns, cube, boxes in cubes_with_boxes(reader, radar, labels, poses):
                 cells = cfar_map(cube_power(cube), params.chain)[0]
                 on_car, _near = cfar_peaks_on_boxes(cube, cells, cube_ns, calibration, poses, boxes, params)
                 new = box_label_mask(cube, cube_ns, calibration, poses, boxes, params)
