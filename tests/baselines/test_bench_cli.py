@@ -225,8 +225,10 @@ def test_under_torchrun_every_rank_trains_each_seed_and_rank_0_alone_writes_the_
     for key in retrained:
         subprocess.run(["rm", "-r", str(copy / "rows" / key / "seed-0")], check=True)
     env = {**os.environ, "XDG_CACHE_HOME": str(home / "cache")}
-    done = subprocess.run(["torchrun", "--standalone", "--nproc-per-node", "2", "-m", "zendar_baselines", "--quick",
-                           "--out", str(copy)], capture_output=True, text=True, timeout=600, env=env, cwd=home)
+    # torchrun as a module of this interpreter: the ranks run the package installed here.
+    done = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", "2",
+                           "-m", "zendar_baselines", "--quick", "--out", str(copy)],
+                          capture_output=True, text=True, timeout=600, env=env, cwd=home)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "[rows/cfar] reused" in done.stderr and "[rows/densenet-37-supervised/seed-0] reused" in done.stderr
     assert done.stdout.count("wrote ") == 1  # rank 0 alone says what it wrote
