@@ -29,9 +29,9 @@ each, and ``--gpus`` GPUs for training under torchrun) from measured per-scene a
   --duration-s 0.5 --split-ratios 1,0,0``);
 - training: the counted FLOPs above over ``--gpus`` GPUs at ``--sustained-tflops`` each, DDP taken
   as scaling linearly (optimistic: the paper's global batch of 8 leaves 2 frames per GPU on 4);
-- the CFAR row's and each CNN seed's chain fit and scoring run in one process (rank 0 under
-  torchrun), one scene after another, at the same cost per cube (a CNN's peaks are taken as many as
-  CFAR's; the model's inference is left out).
+- the CFAR row's chain fit and scoring run in one process; each CNN seed's are shared by the
+  torchrun ranks (every ``--gpus``-th scene each), at the same cost per cube (a CNN's peaks are taken
+  as many as CFAR's; the model's inference is left out).
 """
 
 from __future__ import annotations
@@ -139,8 +139,8 @@ def cluster_projection(args: argparse.Namespace, config, profile, training_s_one
         ("CNN training, every row and seed", f"{training_s_one_gpu / 3600:.1f} GPU-h at {args.sustained_tflops:g} TFLOP/s",
          f"{args.gpus} GPUs (torchrun, DDP)", training_s_one_gpu / args.gpus / 3600),
         ("each CNN seed's chain fit and scoring (its own peaks)",
-         f"{n_seeds} seeds x ~{n_fit_and_score} scenes x {scene_label_h:.2f} h", "rank 0, 1 process",
-         n_seeds * n_fit_and_score * scene_label_h),
+         f"{n_seeds} seeds x ~{n_fit_and_score} scenes x {scene_label_h:.2f} h", f"{args.gpus} ranks sharing the scenes",
+         n_seeds * math.ceil(n_fit_and_score / args.gpus) * scene_label_h),
     ]
     print(f"\nprojected wall time of --config {config.name} on {args.cpu_nodes} CPU nodes x {args.cores_per_node} cores "
           f"({args.workers_per_node} Dask workers each) and {args.gpus} GPUs; chain measured here: {per_cube_s * 1e3:.0f} ms "

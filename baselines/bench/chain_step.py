@@ -20,6 +20,7 @@ from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.detection import ChainParams
 from zendar_dataset.errors import ZendarError
 
+from zendar_baselines.bench import ranks
 from zendar_baselines.bench.context import RunContext
 from zendar_baselines.bench.run_directory import RunDirectory, read_json
 from zendar_baselines.classical.chain_fit import CellsFor, cfar_cells_for, fit_chain
@@ -44,8 +45,10 @@ def fitting_scenes(run: RunContext, split: SemiSupervisedSplit) -> tuple[list[st
 
 
 def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, cells_for: CellsFor, base: ChainParams,
-                    step_dir: Path, threshold_by: str = "points") -> tuple[ChainParams, dict[str, Any]]:
-    """Fit the chain on ``detector``'s cells (``cells_for``) and write ``step_dir / chain_fit.json``.
+                    step_dir: Path, threshold_by: str = "points",
+                    shard: ranks.SceneShard | None = None) -> tuple[ChainParams, dict[str, Any]]:
+    """Fit the chain on ``detector``'s cells (``cells_for``) and write ``step_dir / chain_fit.json``
+    (rank 0 writes it; with ``shard``, torchrun's ranks share the scenes and each returns the fit).
 
     Returns
     -------
@@ -59,12 +62,13 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
     """
     fit_ids, check_ids = fitting_scenes(run, split)
     params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split,
-                                progress=run.progress,
-                                threshold_by=threshold_by)
+                                progress=run.progress, threshold_by=threshold_by, shard=shard)
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
               "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
-    write_json_atomic(step_dir / CHAIN_FIT_FILE, {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "detector": detector,
-                                                  "fitted": fitted, "parameters": params.to_json(), "summary": summary})
+    if ranks.is_main():
+        write_json_atomic(step_dir / CHAIN_FIT_FILE, {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
+                                                      "detector": detector, "fitted": fitted,
+                                                      "parameters": params.to_json(), "summary": summary})
     return params, summary
 
 
@@ -85,9 +89,9 @@ def cfar_chain_step(directory: RunDirectory, run: RunContext, split: SemiSupervi
 
 
 def write_cnn_chain_fit(run: RunContext, split: SemiSupervisedSplit, checkpoint: Path, detector: str,
-                        step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
+                        step_dir: Path, shard: ranks.SceneShard | None = None) -> tuple[ChainParams, dict[str, Any]]:
     """A CNN row seed's fit, on the peaks of the model in ``checkpoint``, its SAR threshold chosen by the
-    detections (:func:`zendar_baselines.classical.chain_fit.fit_on_frames`)."""
+    detections (:func:`zendar_baselines.classical.chain_fit.fit_on_frames`); ``shard``: as :func:`write_chain_fit`."""
     from zendar_baselines.bench.scoring import CNN_CHAIN, load_model, model_cells_for, model_inputs
     from zendar_baselines.bench.steps import scene_maps
 
@@ -95,7 +99,7 @@ def write_cnn_chain_fit(run: RunContext, split: SemiSupervisedSplit, checkpoint:
     channels = model_inputs(architecture)
     cells_for = model_cells_for(model, run.config.window, run.device,
                                 lambda reader, radar: scene_maps(reader, radar, run.inputs_dir, channels))
-    return write_chain_fit(run, split, detector, cells_for, CNN_CHAIN, step_dir, threshold_by="detections")
+    return write_chain_fit(run, split, detector, cells_for, CNN_CHAIN, step_dir, threshold_by="detections", shard=shard)
 
 
 def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:

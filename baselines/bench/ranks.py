@@ -5,11 +5,14 @@
 
 With ``WORLD_SIZE`` > 1 (torchrun sets it), rank 0 runs every step as one process would — simulation
 (on a Dask cluster with ``--scheduler``), automatic labels, masks, chain fits, scoring, every file
-written, resume unchanged — except that each CNN seed is trained by all the ranks together:
-:func:`zendar_baselines.cnn.training.train` wraps the model in ``DistributedDataParallel`` and gives
-each rank ``batch_size / WORLD_SIZE`` samples of every global batch. The other ranks write nothing:
-they wait for rank 0 to hand them a list of seed steps (:func:`hand_out`), train each with it, and
-wait again (:func:`barrier`) while rank 0 fits that seed's chain and scores it. gloo on CPUs, nccl
+written, resume unchanged — except that each CNN seed is trained, its chain fitted and its test
+split predicted by all the ranks together: :func:`zendar_baselines.cnn.training.train` wraps the
+model in ``DistributedDataParallel`` and gives each rank ``batch_size / WORLD_SIZE`` samples of every
+global batch, and the chain fit's and the predictions' loops over scenes give each rank every
+``WORLD_SIZE``-th scene (:class:`SceneShard`), their results gathered on every rank in scene order, so
+the fit and the predictions are those of one process. The other ranks write nothing: they wait for
+rank 0 to hand them a list of seed steps (:func:`hand_out`), do their part of each, and wait again
+(:func:`barrier`) while rank 0 scores it with the evaluator and writes its files. gloo on CPUs, nccl
 with ``--device cuda`` (each rank on ``cuda:LOCAL_RANK``).
 
 A rank that fails ends the run: torchrun stops the other ranks when one exits with an error. The
@@ -89,6 +92,37 @@ def barrier() -> None:
     dist.barrier()
 
 
+@dataclass(frozen=True)
+class SceneShard:
+    """The scenes one rank of ``world_size`` reads when the ranks share a per-scene loop (a CNN seed's
+    chain fit and scoring): every ``world_size``-th scene from its ``rank``; :meth:`gather` gives every
+    rank every rank's results. Without torchrun (one rank) it is every scene, and gathering does nothing.
+    """
+
+    rank: int
+    world_size: int
+
+    @classmethod
+    def here(cls) -> SceneShard:
+        """This process's share (all scenes without torchrun)."""
+        ranks = current()
+        return cls(ranks.rank, ranks.world_size)
+
+    def mine(self, scene_ids: list[str]) -> list[str]:
+        """This rank's scenes of ``scene_ids`` (in their order)."""
+        return list(scene_ids)[self.rank :: self.world_size]
+
+    def gather(self, parts: dict[str, Any]) -> dict[str, Any]:
+        """Every rank's ``parts`` (scene id -> result) in one dict, on every rank."""
+        if self.world_size <= 1:
+            return parts
+        import torch.distributed as dist
+
+        gathered: list[dict[str, Any] | None] = [None] * self.world_size
+        dist.all_gather_object(gathered, parts)
+        return {scene_id: part for rank_parts in gathered for scene_id, part in (rank_parts or {}).items()}
+
+
 def follow(train: Callable[[Any], None]) -> None:
     """A rank other than 0: ``train(step)`` each seed step rank 0 hands out, together with it, until it
     says the run is over."""
@@ -98,4 +132,5 @@ def follow(train: Callable[[Any], None]) -> None:
             barrier()  # rank 0 fits the step's chain and scores it meanwhile
 
 
-__all__ = ["Ranks", "WAIT_FOR_RANK_0", "barrier", "current", "follow", "hand_out", "is_main", "process_group"]
+__all__ = ["Ranks", "SceneShard", "WAIT_FOR_RANK_0", "barrier", "current", "follow", "hand_out", "is_main",
+           "process_group"]

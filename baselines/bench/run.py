@@ -169,11 +169,10 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
 
 def _train_seed_here(step: SeedStep) -> None:
-    """A rank other than 0: its part of training ``step``'s seed (its files are rank 0's to write)."""
-    from zendar_baselines.bench import steps
-
+    """A rank other than 0: its part of ``step``'s seed (:func:`_train_and_score`; the files are rank 0's)."""
     context = replace(step.context, progress=False)
-    steps.train_row(context, step.labels, step.row, Path(context.run_path) / step.name)
+    _train_and_score(context, step.labels, step.row, Path(context.run_path) / step.name, _process_scenes(context),
+                     ranks.SceneShard.here())
 
 
 def _run_bench(options: BenchOptions) -> dict[str, Any]:
@@ -282,9 +281,11 @@ def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> 
     if distributed:
         ranks.hand_out(todo)  # the other ranks train each of these seeds with this one
     if jobs <= 1 or len(todo) <= 1 or distributed:
+        shard = ranks.SceneShard.here() if distributed else None
         with ScoringScenes(seed_steps[0].context.dataset) as test_scenes:
             for step in todo:
-                run.step(step.name, step.inputs, lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes))
+                run.step(step.name, step.inputs,
+                         lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes, shard))
                 if distributed:
                     ranks.barrier()
         return
@@ -310,26 +311,35 @@ def _never(step_dir: Path) -> None:
 _WORKER_SCENES: dict[Path, ScoringScenes] = {}
 
 
-def _run_seed_step(step: SeedStep) -> None:
+def _process_scenes(context: RunContext) -> ScoringScenes:
+    """This process's test scenes, opened by its first seed and kept for the next."""
     from zendar_baselines.bench.scoring import ScoringScenes
 
-    context = replace(step.context, progress=False)  # one bar in the parent counts the seeds
     scenes = _WORKER_SCENES.get(context.root)
     if scenes is None:
         scenes = _WORKER_SCENES[context.root] = ScoringScenes(context.dataset)
+    return scenes
+
+
+def _run_seed_step(step: SeedStep) -> None:
+    context = replace(step.context, progress=False)  # one bar in the parent counts the seeds
     run = RunDirectory(context.run_path, step.identity)
-    run.step(step.name, step.inputs, lambda d: _train_and_score(context, step.labels, step.row, d, scenes))
+    run.step(step.name, step.inputs, lambda d: _train_and_score(context, step.labels, step.row, d, _process_scenes(context)))
 
 
 def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,
-                     test_scenes: ScoringScenes) -> None:
+                     test_scenes: ScoringScenes, shard: ranks.SceneShard | None = None) -> None:
+    """Train one seed, fit its chain on its peaks, predict the test split and score it. With ``shard``
+    (under torchrun, on every rank) the ranks train together and share the scenes of the fit and the
+    predictions; rank 0 alone writes the files and runs the evaluator."""
     from zendar_baselines.bench import chain_step, scoring, steps
 
     checkpoint = steps.train_row(context, labels, row, out_dir)
-    params, fit = chain_step.write_cnn_chain_fit(context, labels.split, checkpoint, row.row_key, out_dir)
+    params, fit = chain_step.write_cnn_chain_fit(context, labels.split, checkpoint, row.row_key, out_dir, shard)
     predictions = scoring.cnn_predictions(context.dataset, context.config, checkpoint, context.device, params, test_scenes, fit,
-                                          progress=context.progress)
-    scoring.score_into(out_dir, predictions, context.root)
+                                          progress=context.progress, shard=shard)
+    if ranks.is_main():
+        scoring.score_into(out_dir, predictions, context.root)
 
 
 def _copy_first_seed(row_dir: Path) -> None:

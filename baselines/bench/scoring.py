@@ -27,6 +27,7 @@ from zendar_dataset.geometry.frames import EgoPoses
 from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.bench.configs import BenchConfig
+from zendar_baselines.bench.ranks import SceneShard
 from zendar_baselines.classical import cfar_baseline
 from zendar_baselines.classical.chain_fit import CellsFor
 from zendar_baselines.cnn.input_channels import InputChannels, scene_input_maps
@@ -202,7 +203,8 @@ def model_cells_for(model, window: int, device: str, maps_of: Callable[[SceneRea
 
 def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig, checkpoint: Path, device: str,
                     params: ChainParams | None = None, scenes: ScoringScenes | None = None,
-                    chain_fit: dict[str, Any] | None = None, progress: bool = True) -> dict[str, Any]:
+                    chain_fit: dict[str, Any] | None = None, progress: bool = True,
+                    shard: SceneShard | None = None) -> dict[str, Any]:
     """A trained model's detections on every test frame, through the CFAR baseline's chain.
 
     Per radar cube (the first cubes of a scene with their window padded by the first map), the
@@ -211,7 +213,8 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
     peaks, whose fit ``chain_fit`` summarises in the meta) and clustered with the other radar's
     points of the frame. ``scenes``: the test scenes shared with other scorings
     (:class:`ScoringScenes`); by default they are opened for this call only. ``progress``: show a
-    progress bar over the frames.
+    progress bar over the frames. ``shard``: torchrun's ranks share the test scenes
+    (:class:`zendar_baselines.bench.ranks.SceneShard`), and every rank returns every frame's detections.
     """
     model, architecture = load_model(checkpoint, device)
     params = CNN_CHAIN if params is None else params
@@ -222,7 +225,7 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
         if scenes is None:
             scenes = stack.enter_context(ScoringScenes(root, keep=False))
         results = _predict_test_split(model, model_inputs(architecture), scenes, window, params, device,
-                                      architecture["name"], progress)
+                                      architecture["name"], progress, shard)
     meta = {"method": f"{architecture['name']} probability peaks + SAR test + DBSCAN", "checkpoint": checkpoint.name,
             "architecture": architecture, "parameters": params.to_json(), "peak_floor": PEAK_FLOOR}
     if chain_fit is not None:
@@ -231,11 +234,14 @@ def cnn_predictions(root: DatasetIndex | str | os.PathLike, config: BenchConfig,
 
 
 def _predict_test_split(model, channels: InputChannels, scenes: ScoringScenes, window: int, params: ChainParams,
-                        device: str, name: str, progress: bool) -> dict[str, list[dict[str, float]]]:
+                        device: str, name: str, progress: bool,
+                        shard: SceneShard | None = None) -> dict[str, list[dict[str, float]]]:
     """Per test frame id, the detections of ``model``'s peaks through the chain (see :func:`cnn_predictions`)."""
-    results: dict[str, list[dict[str, float]]] = {}
+    per_scene: dict[str, dict[str, list[dict[str, float]]]] = {}
+    scene_ids = scenes.scene_ids()
     with tqdm(desc=f"{name} test", unit="frame", disable=not progress) as bar:
-        for scene_id in scenes.scene_ids():
+        for scene_id in scene_ids if shard is None else shard.mine(scene_ids):
+            results = per_scene[scene_id] = {}
             with scenes.opened(scene_id) as scene:
                 probability = {radar: cube_probabilities(model, scenes.maps(scene, radar, channels), window, device)
                                for radar in scene.reader.sensors("radar")}
@@ -244,4 +250,6 @@ def _predict_test_split(model, channels: InputChannels, scenes: ScoringScenes, w
                     points = FramePoints.concatenate([to_frame(cube, scene.poses, frame_ns) for cube in found])
                     results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
                     bar.update(1)
-    return results
+    if shard is not None:
+        per_scene = shard.gather(per_scene)
+    return {fid: detections for scene_id in scene_ids for fid, detections in per_scene[scene_id].items()}

@@ -42,7 +42,7 @@ import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sklearn.metrics import precision_recall_curve, roc_auc_score, roc_curve
@@ -68,6 +68,9 @@ from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
 
 from zendar_baselines.labels.splits import SemiSupervisedSplit
+
+if TYPE_CHECKING:  # the ranks sharing a loop are the bench's (torchrun); only their two methods are used here
+    from zendar_baselines.bench.ranks import SceneShard
 
 # A cluster counts towards the offset when a label lies this close to its uncorrected centre: a car
 # length, so that clusters short by half a car's depth (and the lag of a cube up to 0.1 s older than
@@ -149,6 +152,16 @@ class LabelledFrames:
             {scene: [fid for fid in fids if fid in keep] for scene, fids in self.scene_frames.items() if keep.intersection(fids)},
         )
 
+    @classmethod
+    def merged(cls, parts: list[LabelledFrames]) -> LabelledFrames:
+        """The frames of ``parts`` (of different scenes) in one, in the parts' order."""
+        out = cls({}, {}, {}, {}, {})
+        for part in parts:
+            for mine, theirs in ((out.points, part.points), (out.labels, part.labels), (out.on_car, part.on_car),
+                                 (out.range_m, part.range_m), (out.scene_frames, part.scene_frames)):
+                mine.update(theirs)
+        return out
+
     def held_out(self, share: float = HELD_OUT_SHARE) -> tuple[LabelledFrames, LabelledFrames]:
         """``(fit, check)``: the last ``share`` of each scene's frames (at least one) held out, when
         the scene has two frames or more."""
@@ -162,23 +175,27 @@ class LabelledFrames:
 
 def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsFor, params: ChainParams | None = None,
                     progress: bool = True, description: str = "chain_fit",
-                    split: SemiSupervisedSplit | None = None) -> LabelledFrames:
+                    split: SemiSupervisedSplit | None = None, shard: SceneShard | None = None) -> LabelledFrames:
     """Run the chain up to the SAR values on every labelled frame of ``scene_ids`` (scenes without
     labels are skipped), with the cells ``cells_for`` gives (:func:`cfar_cells_for`, or a CNN's peaks).
 
     With ``split``, only the frames in its labelled segments are taken, their labels read through
     :meth:`~zendar_baselines.labels.splits.SemiSupervisedSplit.labelled_view` (the split's guard: no
-    manual label outside the labelled segments is read).
+    manual label outside the labelled segments is read). With ``shard`` (torchrun's ranks sharing the
+    loop), this process reads its share of the scenes and every rank's frames are gathered: every rank
+    returns the frames one process would, in the same order.
     """
     params = ChainParams() if params is None else params
-    frames = LabelledFrames({}, {}, {}, {}, {})
-    for scene_id in tqdm(scene_ids, desc=description, unit="scene", disable=not progress):
+    parts: dict[str, LabelledFrames] = {}
+    mine = scene_ids if shard is None else shard.mine(scene_ids)
+    for scene_id in tqdm(mine, desc=description, unit="scene", disable=not progress):
         with index.open_scene(scene_id) as opened:
             reader = opened if split is None else split.labelled_view(opened)
             labels = reader.labels()
             if labels is None:
                 continue
             poses = reader.ego_poses()
+            frames = parts[scene_id] = LabelledFrames({}, {}, {}, {}, {})
             frames.scene_frames[scene_id] = []
             for frame_ns, found in frame_cube_points(reader, cells_for(reader), params, poses=poses):
                 if split is not None and not split.is_labelled(scene_id, np.array([frame_ns], np.int64))[0]:
@@ -192,7 +209,9 @@ def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsF
                 frames.range_m[fid] = np.hypot(frames.points[fid].points_xy[:, 0], frames.points[fid].points_xy[:, 1])
                 frames.labels[fid] = np.stack([boxes.x, boxes.y], axis=1)
                 frames.scene_frames[scene_id].append(fid)
-    return frames
+    if shard is not None:
+        parts = shard.gather(parts)
+    return LabelledFrames.merged([parts[scene_id] for scene_id in scene_ids if scene_id in parts])
 
 
 def centre_offset_m(frames: LabelledFrames, params: ChainParams,
@@ -331,7 +350,7 @@ def _counts(frames: LabelledFrames) -> dict[str, Any]:
 def fit_chain(
     index: DatasetIndex, fit_scene_ids: list[str], check_scene_ids: list[str], cells_for: CellsFor,
     base: ChainParams | None = None, *, detector: str = "CFAR", progress: bool = True,
-    split: SemiSupervisedSplit | None = None, threshold_by: str = "points",
+    split: SemiSupervisedSplit | None = None, threshold_by: str = "points", shard: SceneShard | None = None,
 ) -> tuple[ChainParams, dict[str, Any]]:
     """Fit the SAR threshold, cluster radius and centre offset on one detector's points (module docstring).
 
@@ -357,6 +376,8 @@ def fit_chain(
         labels never read (:func:`labelled_frames`); the check's scenes are read whole.
     threshold_by : {"points", "detections"}
         How the SAR threshold is chosen (:func:`fit_on_frames`).
+    shard : SceneShard, optional
+        torchrun's ranks sharing the scenes (:func:`labelled_frames`); every rank fits the same constants.
 
     Returns
     -------
@@ -379,10 +400,12 @@ def fit_chain(
         raise ZendarError(f"{index.root}: the detection chain is fitted on training labels, never on split "
                           f"{GUARDED_SPLIT!r} (scenes {guarded})")
     base = ChainParams() if base is None else base
-    frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})", split)
+    frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})", split,
+                             shard)
     if not frames.points:
         raise ZendarError(f"{index.root}: scenes {list(fit_scene_ids)} have no labelled frame to fit the detection chain on")
-    check = labelled_frames(index, list(check_scene_ids), cells_for, base, progress, f"chain check ({detector})")
+    check = labelled_frames(index, list(check_scene_ids), cells_for, base, progress, f"chain check ({detector})",
+                            shard=shard)
     source = "val"
     if not check.points:
         source = "held-out training frames"

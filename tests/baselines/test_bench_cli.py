@@ -211,7 +211,8 @@ def test_under_torchrun_every_rank_trains_each_seed_and_rank_0_alone_writes_the_
     gloo, recorded in their checkpoints), the run is written once, and the retrained rows match the
     one-process ones within DDP's tolerance: each rank's batch-norm statistics come from its half of
     the batch, so the first epoch's loss agrees to 2 % and the AP over all bands to 0.05 (measured:
-    0.03 % and 1.1 %; -0.011 and +0.014 AP)."""
+    0.03 % and 1.1 %; -0.011 and +0.014 AP). The ranks shared the scenes of each seed's chain fit and
+    predictions: ``verify`` re-scores every seed from its checkpoint in one process to the same AP."""
     from zendar_baselines.cnn.checkpoints import load_checkpoint
 
     home, _ = quick_run
@@ -240,6 +241,8 @@ def test_under_torchrun_every_rank_trains_each_seed_and_rank_0_alone_writes_the_
         assert after["first_loss"] == pytest.approx(before[key]["first_loss"], rel=0.02)
         assert after["ap_all"] == pytest.approx(before[key]["ap_all"], abs=0.05)
     assert [name for name in copy.rglob("*") if ".tmp-" in name.name] == []
+    verified = bench("verify", "--out", str(copy), env_home=home)
+    assert verified.returncode == 0 and "every row reproduces" in verified.stdout, verified.stdout[-2000:]
 
 
 def test_ranks_that_do_not_divide_the_batch_are_refused_before_anything_is_written(tmp_path, monkeypatch, capsys):

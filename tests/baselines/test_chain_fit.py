@@ -210,6 +210,45 @@ def test_the_fit_reads_the_labelled_segments_alone(tiny_root, monkeypatch):
         np.testing.assert_array_equal(again.labels[fid], segments.labels[fid])
 
 
+class _TwoRanks:
+    """Two ranks of one scene loop, played one after the other in this process: rank 1 runs first and
+    keeps its parts; rank 0 then gathers its own with them, as ``all_gather_object`` would."""
+
+    def __init__(self) -> None:
+        self.parts: dict = {}
+
+    def rank(self, rank: int):
+        from zendar_baselines.bench.ranks import SceneShard
+
+        ranks = self
+
+        class Shard(SceneShard):
+            def gather(self, parts):
+                if self.rank == 1:
+                    ranks.parts = dict(parts)
+                    return parts
+                return {**parts, **ranks.parts}
+
+        return Shard(rank, 2)
+
+
+def test_ranks_sharing_the_scenes_give_the_frames_of_one_process(tiny_root):
+    """Each rank reads every second scene; the gathered frames equal one process's, in its order."""
+    index = open_dataset(str(tiny_root))
+    scenes = index.scene_ids("train") + index.scene_ids("val")
+    assert len(scenes) >= 3
+    whole = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False)
+    two = _TwoRanks()
+    alone = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, shard=two.rank(1))
+    assert set(alone.scene_frames) == set(scenes[1::2])
+    gathered = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, shard=two.rank(0))
+    assert list(gathered.scene_frames) == list(whole.scene_frames) and list(gathered.points) == list(whole.points)
+    for fid in whole.points:
+        np.testing.assert_array_equal(gathered.points[fid].sar_db, whole.points[fid].sar_db)
+        np.testing.assert_array_equal(gathered.on_car[fid], whole.on_car[fid])
+        np.testing.assert_array_equal(gathered.labels[fid], whole.labels[fid])
+
+
 def test_a_threshold_by_the_detections_keeps_the_cars_the_points_criterion_would_drop():
     """CNN-like points: every point already moving, cars and clutter alike, the cars' SAR values spread
     over the clutter's. F1 on the points cuts inside the cars' values and drops the car of some
