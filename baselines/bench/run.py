@@ -265,8 +265,10 @@ class SeedStep:
 
 
 def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> None:
-    """Every seed step not done yet: in this process (``jobs`` 1), or on ``jobs`` worker processes
-    of one thread each. A seed's results do not depend on where it ran: training uses
+    """Every seed step not done yet: in this process (``jobs`` 1), on ``jobs`` worker processes of one
+    thread each, or under torchrun with every rank (:mod:`zendar_baselines.bench.ranks`; rank 0 hands
+    the steps out). A seed's results do not depend on where it ran (under torchrun: within DDP's
+    tolerance, docs/cluster.md): training uses
     :data:`zendar_baselines.cnn.training.TRAINING_THREADS` threads either way, and each step writes
     only its own directory."""
     from zendar_baselines.bench.scoring import ScoringScenes
