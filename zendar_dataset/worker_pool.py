@@ -3,8 +3,9 @@
 The simulator's scenes (``zendar-data synth --jobs``) and ``zendar-bench``'s CNN seeds run here.
 Workers are spawned, not forked: a forked child of a process whose OpenMP, BLAS or torch thread pools
 have run can deadlock. Each worker caps numba's, BLAS/OpenMP's and torch's threads, so ``jobs``
-workers of ``threads`` threads fill the CPUs without oversubscribing them, and leaves Ctrl-C to the
-parent, which stops every worker at once.
+workers of ``threads`` threads fill the CPUs without oversubscribing them, keeps the memory it frees
+for reuse (:mod:`zendar_dataset.freed_memory`), and leaves Ctrl-C to the parent, which stops every
+worker at once.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
+
+from zendar_dataset.freed_memory import keep_freed_memory
 
 Task = TypeVar("Task")
 
@@ -33,9 +36,11 @@ def usable_cpus() -> int:
 
 
 def _init_worker(threads: int) -> None:
-    """Worker set-up: Ctrl-C left to the parent, numba, BLAS/OpenMP and torch threads capped."""
+    """Worker set-up: Ctrl-C left to the parent, freed memory kept for reuse, numba, BLAS/OpenMP and
+    torch threads capped."""
     global _THREAD_LIMITS
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    keep_freed_memory()
     import numba
     from threadpoolctl import threadpool_limits
 
