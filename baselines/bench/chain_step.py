@@ -62,7 +62,7 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
     """
     fit_ids, check_ids = fitting_scenes(run, split)
     params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split,
-                                progress=run.progress, threshold_by=threshold_by, shard=shard)
+                                progress=run.progress, threshold_by=threshold_by, shard=shard, scenes=run.kept_scenes())
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
               "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
     if ranks.is_main():

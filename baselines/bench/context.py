@@ -9,6 +9,7 @@ from typing import Any
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 from zendar_baselines.bench.configs import BenchConfig
+from zendar_baselines.classical.kept_scenes import KeptScenes
 from zendar_baselines.cnn.input_channels import InputChannels
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_fingerprint
@@ -16,6 +17,10 @@ from zendar_baselines.labels.splits import SemiSupervisedSplit
 
 #: Under the run directory: memory-mapped log-power maps shared by every row's training.
 INPUTS_DIR = "inputs"
+
+#: This process's kept training and validation scenes, per dataset (root and fingerprint):
+#: :meth:`RunContext.kept_scenes`.
+_KEPT_SCENES: dict[tuple[Path, str], KeptScenes] = {}
 
 
 @dataclass(frozen=True)
@@ -62,9 +67,26 @@ class RunContext:
         """Where the training scenes' log-power maps are cached."""
         return self.run_path / INPUTS_DIR
 
+    def kept_scenes(self) -> KeptScenes:
+        """This process's training and validation scenes, opened once for every seed's passes: the
+        training windows and the chain fit (:class:`~zendar_baselines.classical.kept_scenes.KeptScenes`;
+        the test split's are the scorings' :class:`~zendar_baselines.bench.scoring.ScoringScenes`)."""
+        key = (self.root, self.fingerprint)
+        if key not in _KEPT_SCENES:
+            scene_ids = [s for split in ("train", "val") if split in self.dataset.splits for s in self.dataset.scene_ids(split)]
+            _KEPT_SCENES[key] = KeptScenes(self.dataset, scene_ids)
+        return _KEPT_SCENES[key]
+
     def step_inputs(self) -> dict[str, Any]:
         """What every step's cache key starts from: the configuration, the dataset and the code."""
         return {"config": self.config.to_json(), "dataset": self.fingerprint, "code_version": self.code_version}
+
+
+def close_kept_scenes() -> None:
+    """Close every scene :meth:`RunContext.kept_scenes` kept open in this process (at the end of a run)."""
+    for scenes in _KEPT_SCENES.values():
+        scenes.close()
+    _KEPT_SCENES.clear()
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,7 @@ from zendar_dataset.worker_pool import run_in_workers, usable_cpus
 
 from zendar_baselines.bench import ranks
 from zendar_baselines.bench.configs import BenchConfig
-from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels
+from zendar_baselines.bench.context import RowSeed, RunContext, TrainingLabels, close_kept_scenes
 from zendar_baselines.bench.results_table import METHOD_NAMES, Row, csv_table, markdown_table
 from zendar_baselines.bench.run_directory import STEP_RECORD, RunDirectory, read_json
 
@@ -162,7 +162,10 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
         if not process.is_main:
             ranks.follow(_train_seed_here)
             return {}
-        results = _run_bench(options)
+        try:
+            results = _run_bench(options)
+        finally:
+            close_kept_scenes()
         if process.world_size > 1:
             ranks.hand_out(None)  # the other ranks' run is over
         return results
@@ -295,6 +298,7 @@ def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> 
     # twice, and the later architectures of the config are the slower ones (a DenseNet-67 seed took
     # up to 2.4 times an FPN-ResNet-34 one on the demo config).
     todo = sorted(reversed(todo), key=lambda step: not step.row.pretrained)
+    close_kept_scenes()  # the workers keep their own; this process passes over them no more
     say(f"[rows] {len(todo)} CNN seeds on {jobs} worker processes (one thread each)")
     with tqdm(total=len(todo), desc="CNN seeds", unit="seed") as bar:
         run_in_workers(

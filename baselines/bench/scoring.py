@@ -5,9 +5,8 @@ official evaluator, with the test scenes opened once for every scoring of a run 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -23,13 +22,12 @@ from zendar_dataset.eval import evaluate
 from zendar_dataset.eval.report import write_metrics
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import DatasetIndex, SceneReader
-from zendar_dataset.geometry.frames import EgoPoses
-from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.bench.configs import BenchConfig
 from zendar_baselines.bench.ranks import SceneShard
 from zendar_baselines.classical import cfar_baseline
 from zendar_baselines.classical.chain_fit import CellsFor
+from zendar_baselines.classical.kept_scenes import KeptScene, KeptScenes
 from zendar_baselines.cnn.input_channels import InputChannels, scene_input_maps
 from zendar_baselines.fingerprints import dataset_index, dataset_location
 
@@ -71,75 +69,25 @@ def score_into(out_dir: Path, predictions: dict[str, Any], root: Path) -> None:
     write_metrics(metrics, out_dir)
 
 
-#: Budget for what :class:`ScoringScenes` keeps between scorings: the test split's SAR magnitudes and
-#: log-power maps (float32). The demo config's take ~280 MB; the paper config's would not fit, and
-#: every scoring then reads them again.
-TEST_SCENE_CACHE_BYTES = 1 << 30
-
-
-@dataclasses.dataclass
-class _ScoringScene:
-    """One open test scene with what every scoring of it needs."""
-
-    reader: SceneReader
-    poses: EgoPoses
-    sar: SarFrames
-    maps: dict[tuple[str, InputChannels], np.ndarray] = dataclasses.field(default_factory=dict)
-
-
-class ScoringScenes:
+class ScoringScenes(KeptScenes):
     """The test split's scenes, opened once for many scorings (a context manager; closes them on exit).
 
     A default run scores 18 CNNs on the same scenes. With ``keep`` and within
-    :data:`TEST_SCENE_CACHE_BYTES`, the SAR magnitudes (with their medians) and the log-power maps
-    read by the first scoring are kept for the next; results equal reading the scenes afresh (the
-    same arrays, read once; the maps are read-only).
+    :data:`~zendar_baselines.classical.kept_scenes.KEPT_SCENE_BYTES` (SAR images and log-power maps),
+    the SAR magnitudes (with their medians) and the log-power maps read by the first scoring are
+    kept for the next; results equal reading the scenes afresh (the same arrays, read once; the maps
+    are read-only).
     """
 
     def __init__(self, dataset: DatasetIndex | str | os.PathLike, *, keep: bool = True) -> None:
-        self.index = dataset_index(dataset)
+        index = dataset_index(dataset)
+        super().__init__(index, index.scene_ids("test"), keep=keep, maps_too=True)
         self.root = Path(self.index.root)
-        self.keep = keep
-        self._scenes: dict[str, _ScoringScene] = {}
-        self._stack = contextlib.ExitStack()
-
-    def __enter__(self) -> ScoringScenes:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self._scenes.clear()
-        self._stack.close()
 
     def scene_ids(self) -> list[str]:
         return self.index.scene_ids("test")
 
-    def _fits(self) -> bool:
-        total = 0
-        for scene_id in self.scene_ids():
-            with self.index.open_scene(scene_id) as reader:
-                arrays = [f"sar/{s}/image" for s in reader.sensors("sar")]
-                arrays += [f"radar/{r}/cube" for r in reader.sensors("radar")]
-                total += sum(4 * int(np.prod(reader.array(a).shape)) for a in arrays)
-        return total <= TEST_SCENE_CACHE_BYTES
-
-    @contextlib.contextmanager
-    def opened(self, scene_id: str) -> Iterator[_ScoringScene]:
-        """The open scene: kept for later scorings when ``keep`` and the split fits the budget,
-        else opened for this ``with`` block only."""
-        if scene_id in self._scenes:
-            yield self._scenes[scene_id]
-            return
-        if self.keep and not self._scenes and not self._fits():
-            self.keep = False
-        if self.keep:
-            reader = self._stack.enter_context(self.index.open_scene(scene_id))
-            self._scenes[scene_id] = _ScoringScene(reader, reader.ego_poses(), SarFrames(reader, keep_frames=None))
-            yield self._scenes[scene_id]
-            return
-        with self.index.open_scene(scene_id) as reader:
-            yield _ScoringScene(reader, reader.ego_poses(), SarFrames(reader))
-
-    def maps(self, scene: _ScoringScene, radar: str, channels: InputChannels = InputChannels()) -> np.ndarray:
+    def maps(self, scene: KeptScene, radar: str, channels: InputChannels = InputChannels()) -> np.ndarray:
         """CNN input maps ``[N, C, R, D]`` of one radar of ``scene`` (kept with the scene):
         log power per antenna and the optional ``channels``."""
         key = (radar, channels)

@@ -183,7 +183,8 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupe
     parts = []
     for scene_id in scenes:
         masks = store.scene(scene_id)
-        with run.dataset.open_scene(scene_id) as reader:
+        with run.kept_scenes().opened(scene_id) as scene:
+            reader = scene.reader
             for radar in reader.sensors("radar"):
                 timestamps, targets = masks[radar]
                 if not np.array_equal(timestamps, reader.timestamps(f"radar/{radar}")):

@@ -67,6 +67,7 @@ from zendar_dataset.eval.protocol import BANDS_M, RANGE_BANDS
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
 
+from zendar_baselines.classical.kept_scenes import KeptScenes
 from zendar_baselines.labels.splits import SemiSupervisedSplit
 
 if TYPE_CHECKING:  # the ranks sharing a loop are the bench's (torchrun); only their two methods are used here
@@ -175,7 +176,8 @@ class LabelledFrames:
 
 def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsFor, params: ChainParams | None = None,
                     progress: bool = True, description: str = "chain_fit",
-                    split: SemiSupervisedSplit | None = None, shard: SceneShard | None = None) -> LabelledFrames:
+                    split: SemiSupervisedSplit | None = None, shard: SceneShard | None = None,
+                    scenes: KeptScenes | None = None) -> LabelledFrames:
     """Run the chain up to the SAR values on every labelled frame of ``scene_ids`` (scenes without
     labels are skipped), with the cells ``cells_for`` gives (:func:`cfar_cells_for`, or a CNN's peaks).
 
@@ -183,21 +185,27 @@ def labelled_frames(index: DatasetIndex, scene_ids: list[str], cells_for: CellsF
     :meth:`~zendar_baselines.labels.splits.SemiSupervisedSplit.labelled_view` (the split's guard: no
     manual label outside the labelled segments is read). With ``shard`` (torchrun's ranks sharing the
     loop), this process reads its share of the scenes and every rank's frames are gathered: every rank
-    returns the frames one process would, in the same order.
+    returns the frames one process would, in the same order. With ``scenes`` (of ``index``'s dataset),
+    the scenes are taken from those kept open for many passes (:class:`KeptScenes`); by default each
+    is opened for this call only. The frames do not depend on it.
     """
     params = ChainParams() if params is None else params
+    if scenes is None:
+        scenes = KeptScenes(index, [], keep=False)
+    elif os.path.realpath(scenes.index.root) != os.path.realpath(index.root):
+        raise ValueError(f"labelled_frames: scenes of {scenes.index.root} given for {index.root}")
     parts: dict[str, LabelledFrames] = {}
     mine = scene_ids if shard is None else shard.mine(scene_ids)
     for scene_id in tqdm(mine, desc=description, unit="scene", disable=not progress):
-        with index.open_scene(scene_id) as opened:
-            reader = opened if split is None else split.labelled_view(opened)
+        with scenes.opened(scene_id) as scene:
+            reader = scene.reader if split is None else split.labelled_view(scene.reader)
             labels = reader.labels()
             if labels is None:
                 continue
-            poses = reader.ego_poses()
+            poses = scene.poses
             frames = parts[scene_id] = LabelledFrames({}, {}, {}, {}, {})
             frames.scene_frames[scene_id] = []
-            for frame_ns, found in frame_cube_points(reader, cells_for(reader), params, poses=poses):
+            for frame_ns, found in frame_cube_points(reader, cells_for(reader), params, poses=poses, sar=scene.sar):
                 if split is not None and not split.is_labelled(scene_id, np.array([frame_ns], np.int64))[0]:
                     continue
                 boxes = LabelBoxes.of_frame(labels, frame_ns)
@@ -351,6 +359,7 @@ def fit_chain(
     index: DatasetIndex, fit_scene_ids: list[str], check_scene_ids: list[str], cells_for: CellsFor,
     base: ChainParams | None = None, *, detector: str = "CFAR", progress: bool = True,
     split: SemiSupervisedSplit | None = None, threshold_by: str = "points", shard: SceneShard | None = None,
+    scenes: KeptScenes | None = None,
 ) -> tuple[ChainParams, dict[str, Any]]:
     """Fit the SAR threshold, cluster radius and centre offset on one detector's points (module docstring).
 
@@ -378,6 +387,8 @@ def fit_chain(
         How the SAR threshold is chosen (:func:`fit_on_frames`).
     shard : SceneShard, optional
         torchrun's ranks sharing the scenes (:func:`labelled_frames`); every rank fits the same constants.
+    scenes : KeptScenes, optional
+        The scenes kept open for many passes (:func:`labelled_frames`); the fit does not depend on it.
 
     Returns
     -------
@@ -401,11 +412,11 @@ def fit_chain(
                           f"{GUARDED_SPLIT!r} (scenes {guarded})")
     base = ChainParams() if base is None else base
     frames = labelled_frames(index, list(fit_scene_ids), cells_for, base, progress, f"chain fit ({detector})", split,
-                             shard)
+                             shard, scenes)
     if not frames.points:
         raise ZendarError(f"{index.root}: scenes {list(fit_scene_ids)} have no labelled frame to fit the detection chain on")
     check = labelled_frames(index, list(check_scene_ids), cells_for, base, progress, f"chain check ({detector})",
-                            shard=shard)
+                            shard=shard, scenes=scenes)
     source = "val"
     if not check.points:
         source = "held-out training frames"

@@ -159,6 +159,7 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
     """The run scores every CNN through one ScoringScenes (SAR magnitudes and maps read once): a model
     scored on kept scenes, on fresh ones, and with the cache over its budget gives the same bytes."""
     from zendar_baselines.bench import chain_step, scoring, steps
+    from zendar_baselines.classical import kept_scenes
     from zendar_baselines.bench.configs import get_config
 
     home, _ = quick_run
@@ -182,7 +183,7 @@ def test_scorings_sharing_the_test_scenes_give_the_recorded_predictions_exactly(
             scoring.cnn_predictions(home, config, steps.final_checkpoint(seed_dirs[0]), "cpu", scenes=scenes)
     assert kept == [*recorded, recorded[0]]
     assert score(seed_dirs[1]) == recorded[1]
-    monkeypatch.setattr(scoring, "TEST_SCENE_CACHE_BYTES", 0)
+    monkeypatch.setattr(kept_scenes, "KEPT_SCENE_BYTES", 0)
     with scoring.ScoringScenes(root) as scenes:
         assert score(seed_dirs[0], scenes) == recorded[0]
         with scenes.opened(first) as scene, scenes.opened(first) as again:

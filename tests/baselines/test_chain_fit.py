@@ -306,3 +306,54 @@ def test_the_detection_grid_computed_once_per_dynamic_set_equals_every_pair_comp
     assert fit["radius_grid"] == [{"cluster_eps_m": t.cluster_eps_m, "centre_offset_m": t.centre_offset_m, "ap_all": a["all"]}
                                   for t, a in plain if t.sar.threshold_db == best.sar.threshold_db]
     assert len({a["all"] for _, a in plain}) > 5  # the grid's pairs do differ: the test compares something
+
+
+def _frames_equal(got, expected) -> None:
+    assert list(got.scene_frames) == list(expected.scene_frames) and list(got.points) == list(expected.points)
+    for fid in expected.points:
+        np.testing.assert_array_equal(got.points[fid].sar_db, expected.points[fid].sar_db)
+        np.testing.assert_array_equal(got.points[fid].points_xy, expected.points[fid].points_xy)
+        np.testing.assert_array_equal(got.on_car[fid], expected.on_car[fid])
+        np.testing.assert_array_equal(got.labels[fid], expected.labels[fid])
+
+
+def test_kept_scenes_give_the_frames_of_fresh_ones_opening_each_scene_once(tiny_root, monkeypatch, tmp_path):
+    """Passes over kept scenes (readers, poses, SAR magnitudes kept) give the frames of scenes opened
+    afresh; the second pass opens no scene; over the budget every pass opens them again."""
+    from zendar_baselines.classical import kept_scenes
+
+    index = open_dataset(str(tiny_root))
+    scenes = index.scene_ids("train") + index.scene_ids("val")
+    fresh = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False)
+    opened = index.open_scene
+    opens: list[str] = []
+
+    def counted(scene_id, **kwargs):
+        opens.append(scene_id)
+        return opened(scene_id, **kwargs)
+
+    monkeypatch.setattr(index, "open_scene", counted)
+    with kept_scenes.KeptScenes(index, scenes) as kept:
+        first = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=kept)
+        n_first = len(opens)
+        assert n_first == 2 * len(scenes)  # the budget's look at each scene's sizes, then the scene kept
+        second = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=kept)
+        assert len(opens) == n_first  # nothing opened again
+        with kept.opened(scenes[0]) as scene:
+            assert scene.sar._cache  # the magnitudes read by the passes stay
+    _frames_equal(first, fresh)
+    _frames_equal(second, fresh)
+
+    monkeypatch.setattr(kept_scenes, "KEPT_SCENE_BYTES", 0)
+    with kept_scenes.KeptScenes(index, scenes) as over_budget:
+        opens.clear()
+        again = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=over_budget)
+        n_again = len(opens)
+        labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=over_budget)
+        assert not over_budget.keep and len(opens) - n_again == len(scenes)  # every scene opened again
+    _frames_equal(again, fresh)
+
+    (tmp_path / "dataset.json").write_bytes((tiny_root / "dataset.json").read_bytes())
+    with pytest.raises(ValueError, match="scenes of"):
+        labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False,
+                        scenes=kept_scenes.KeptScenes(str(tmp_path), []))
