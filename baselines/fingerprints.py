@@ -12,12 +12,13 @@ import hashlib
 import json
 import os
 import re
+import socket
 import weakref
 from typing import Any
 
 import fsspec
 
-from zendar_dataset.errors import ZendarFormatError
+from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format import stores
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 from zendar_dataset.format.schema import DATASET_JSON
@@ -30,6 +31,27 @@ _FINGERPRINTS: weakref.WeakKeyDictionary[DatasetIndex, str] = weakref.WeakKeyDic
 def dataset_index(dataset: DatasetIndex | str | os.PathLike) -> DatasetIndex:
     """``dataset`` itself when already opened, else :func:`~zendar_dataset.format.reader.open_dataset` of it."""
     return dataset if isinstance(dataset, DatasetIndex) else open_dataset(dataset)
+
+
+def dataset_on_worker(root: str, storage_options: dict, scene_id: str) -> DatasetIndex:
+    """The dataset at ``root`` opened by a task of ``scene_id`` on a worker process or a Dask worker.
+
+    Raises
+    ------
+    ZendarError
+        When this host cannot read it, naming the host: every worker must see it at the same path or URL.
+    """
+    try:
+        return open_dataset(root, storage_options)
+    except (OSError, ZendarError) as exc:
+        raise ZendarError(f"{scene_id}: the dataset {root} cannot be read on host {socket.gethostname()} "
+                          f"({exc}); every worker must see it at the same path or URL") from None
+
+
+def task_root(index: DatasetIndex) -> str:
+    """``index``'s root as a task sends it to another host: a URL, or an absolute path (the other host
+    has another working directory)."""
+    return str(index.root) if stores.is_url(index.root) else os.path.abspath(index.root)
 
 
 def dataset_location(dataset: DatasetIndex | str | os.PathLike) -> str | os.PathLike:

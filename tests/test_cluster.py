@@ -23,17 +23,20 @@ from zendar_dataset import cluster as cluster_module  # noqa: E402
 from zendar_dataset.cli import data as data_cli  # noqa: E402
 from zendar_dataset.cluster import SCHEDULER_ENV, DaskCluster, SharedDirectory  # noqa: E402
 from zendar_dataset.errors import ZendarError  # noqa: E402
+from zendar_dataset.format.reader import open_dataset  # noqa: E402
 from zendar_dataset.sim import generate  # noqa: E402
 from zendar_dataset.temporary_files import temporary_sibling  # noqa: E402
 
 from zendar_baselines.bench import autolabels  # noqa: E402
 from zendar_baselines.bench.cli import main as bench_main  # noqa: E402
+from zendar_baselines.classical import cfar_baseline  # noqa: E402
 
 SYNTH = ["--profile", "tiny", "--scenes", "4", "--duration-s", "0.5", "--quiet"]
 REPO = pathlib.Path(__file__).resolve().parents[1]
 # The worker processes' own simulation, captured before any test replaces the client's.
 _RUN_TASK = generate._run_task
 _LABEL_SCENE = autolabels.label_scene
+_PREDICT_SCENE = cfar_baseline.predict_scene
 
 
 @pytest.fixture(autouse=True)
@@ -364,6 +367,50 @@ def test_a_scheduler_that_does_not_answer_stops_autolabels_before_anything_is_wr
     assert message.startswith(f"error: the Dask scheduler at {address} did not answer within 1 s")
     assert "Traceback" not in message
     assert not (tmp_path / "new").exists()
+
+
+def _predicted_in(directory: str, task):
+    """On a worker: predict the scene, leaving a file named for the process that did it."""
+    pathlib.Path(directory, f"{task.scene_id}-{os.getpid()}").touch()
+    return _PREDICT_SCENE(task)
+
+
+def _die_on_first_attempt(marker: str, task):
+    """On a worker: the first attempt at any scene dies (``os._exit``); every other one predicts as usual."""
+    try:
+        open(marker, "x").close()
+    except FileExistsError:
+        return _PREDICT_SCENE(task)
+    os._exit(1)
+
+
+def test_cfar_predictions_on_the_cluster_equal_one_process_byte_for_byte(scheduler, labelled_dataset, tmp_path,
+                                                                        monkeypatch):
+    """One task per test scene on the workers (each scene by a worker, none here), a worker lost mid-scene
+    replaced: the predictions document is the same bytes, in the split's scene order."""
+    test_ids = open_dataset(str(labelled_dataset)).scene_ids("test")
+    assert test_ids
+    here = json.dumps(cfar_baseline.cfar_predictions(labelled_dataset, "test", progress=False))
+    where = tmp_path / "where"
+    where.mkdir()
+    monkeypatch.setattr(cfar_baseline, "predict_scene", functools.partial(_predicted_in, str(where)))
+    with DaskCluster.connect(scheduler) as cluster:
+        there = cfar_baseline.cfar_predictions(labelled_dataset, "test", progress=False, cluster=cluster)
+        assert json.dumps(there) == here and len(there["results"]) > 0
+        tasks = sorted(path.name.rsplit("-", 1) for path in where.iterdir())
+        assert [scene for scene, _ in tasks] == sorted(test_ids)
+        assert str(os.getpid()) not in {pid for _, pid in tasks}
+
+        marker = tmp_path / "first-attempt"
+        monkeypatch.setattr(cfar_baseline, "predict_scene", functools.partial(_die_on_first_attempt, str(marker)))
+        again = cfar_baseline.cfar_predictions(labelled_dataset, "test", progress=False, cluster=cluster)
+        assert marker.exists() and json.dumps(again) == here
+
+
+def test_a_host_that_cannot_read_the_dataset_is_named(tmp_path):
+    task = cfar_baseline.CfarSceneTask(str(tmp_path / "elsewhere"), {}, "scene-0003", cfar_baseline.ChainParams())
+    with pytest.raises(ZendarError, match=f"scene-0003: the dataset .*elsewhere cannot be read on host {socket.gethostname()}"):
+        cfar_baseline.predict_scene(task)
 
 
 def test_ctrl_c_stops_the_workers_and_removes_their_temporaries(scheduler, tmp_path):

@@ -54,8 +54,9 @@ def test_the_defaults_fault_freed_memory_in_again_and_the_setting_does_not():
         assert keep_freed_memory()
         print(faults_per_step())
     """)
-    # 80 MiB is 20480 pages; the defaults give back (and fault in) at least a quarter of it per step.
-    assert default > 5000
+    # 80 MiB is 20480 pages; the defaults give back (and fault in) a fifth to a quarter of it per step
+    # (4649 to 5121 pages measured, depending on what the interpreter allocated before).
+    assert default > 2000
     assert kept < 50
 
 

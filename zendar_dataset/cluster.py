@@ -278,7 +278,7 @@ class DaskCluster:
         function: Callable[[Task], Any],
         tasks: Iterable[Task],
         *,
-        shared: SharedDirectory,
+        shared: SharedDirectory | None,
         on_done: Callable[[Task, Any], None],
         worker_died: Callable[[Task], BaseException],
         on_interrupt: Callable[[], None] | None = None,
@@ -290,8 +290,8 @@ class DaskCluster:
         completion order; after a task fails no new one is started, the tasks in progress are
         finished, and the first failure is raised; a task the scheduler gave up on (its workers died
         ``allowed-failures + 1`` times) fails the run with ``worker_died(task)``. Each task first checks
-        that its worker sees ``shared`` and caps its numba and BLAS threads to its share of its
-        host's CPUs. On Ctrl-C or any other exception here, the queued tasks are cancelled, the
+        that its worker sees ``shared`` (the directory it writes to; None for tasks that only read and
+        return their results) and caps its numba and BLAS threads to its share of its host's CPUs. On Ctrl-C or any other exception here, the queued tasks are cancelled, the
         workers running one are restarted through their nannies (stopping what they write; a worker
         without a nanny finishes its task), ``on_interrupt()`` runs, and the exception propagates.
         """
@@ -382,14 +382,15 @@ def _problem_on_worker(shared: SharedDirectory) -> str | None:
     return shared.problem_here()
 
 
-def _run_on_worker(function: Callable[[Task], Any], task: Task, shared: SharedDirectory, host_threads: dict[str, int]) -> Any:
+def _run_on_worker(function: Callable[[Task], Any], task: Task, shared: SharedDirectory | None,
+                   host_threads: dict[str, int]) -> Any:
     """On a worker: check ``shared``, cap the threads to this worker's share of its host, run ``function(task)``."""
     import numba
     from distributed import get_worker
     from distributed.comm import get_address_host
 
     worker = get_worker()
-    problem = shared.problem_here()
+    problem = None if shared is None else shared.problem_here()
     if problem is not None:
         raise _not_shared(shared.directory, {worker.address: problem}, 1)
     # A host not counted yet (its worker joined after the task was handed out): this worker's own threads.

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,14 +22,13 @@ from tqdm import tqdm
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.cluster import DaskCluster, refuse_url_output
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
-from zendar_dataset.format.stores import is_url
+from zendar_dataset.format.reader import DatasetIndex, SceneReader
 from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.bench.steps import STORE_DIR, mask_parameters
 from zendar_baselines.code_version import code_version
-from zendar_baselines.fingerprints import dataset_index
+from zendar_baselines.fingerprints import dataset_index, dataset_on_worker, task_root
 from zendar_baselines.labels.mask_store import MaskStore, RadarMasks, write_scene_file
 from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.labels.quality import QUALITY_REFERENCE, combine_quality, format_quality, mask_quality
@@ -97,11 +95,7 @@ def label_scene(task: AutoLabelTask) -> LabelledScene:
         When this host cannot read the dataset (naming the host), or the scene has no labels to
         measure against.
     """
-    try:
-        index = open_dataset(task.root, task.storage_options)
-    except (OSError, ZendarError) as exc:
-        raise ZendarError(f"{task.scene_id}: the dataset {task.root} cannot be read on host {socket.gethostname()} "
-                          f"({exc}); every worker must see it at the same path or URL") from None
+    index = dataset_on_worker(task.root, task.storage_options, task.scene_id)
     with index.open_scene(task.scene_id) as reader:
         sar = SarFrames(reader)
         auto = {radar: scene_masks(reader, radar, "auto", sar=sar, params=task.params, progress=False)
@@ -148,8 +142,7 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
     if cluster is not None:
         refuse_url_output(out_dir, "the automatic labels")
     store = MaskStore.create(out_dir / STORE_DIR, index, parameters, code_version=code_version())
-    # Absolute: a worker on another host has another working directory.
-    root = str(index.root) if is_url(index.root) else str(Path(index.root).absolute())
+    root = task_root(index)
     store_dir = Path(store.directory).absolute()
     scores: list[dict[str, Any]] = []
     todo = []

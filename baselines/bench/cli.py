@@ -69,7 +69,8 @@ def _run_arguments(parser: argparse.ArgumentParser) -> None:
                         "with every cell's Doppler-test residual as extra input channels, each against its Table 1 row "
                         "by paired intervals (ablations.md; adds 3 rows of the config's seeds)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                        help="simulate and automatically label the dataset's scenes on the Dask cluster of this "
+                        help="simulate, automatically label and CFAR-predict the dataset's scenes on the Dask "
+                        "cluster of this "
                         "scheduler (tcp://host:8786; "
                         f"default: ${SCHEDULER_ENV} when set); the dataset's directory must be one every worker sees "
                         "(docs/cluster.md); the results do not depend on it")

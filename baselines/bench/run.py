@@ -71,8 +71,8 @@ class BenchOptions:
     ablations : bool
         ``--ablations``: also the rows of :mod:`zendar_baselines.bench.ablations`.
     scheduler : str or None
-        ``--scheduler``: the Dask scheduler the dataset's scenes are simulated and automatically labelled on
-        (docs/cluster.md);
+        ``--scheduler``: the Dask scheduler the dataset's scenes are simulated, automatically labelled and
+        predicted by the CFAR row on (docs/cluster.md);
         None for worker processes here.
     """
 
@@ -193,7 +193,7 @@ def _run_bench(options: BenchOptions) -> dict[str, Any]:
                               "process (run it without torchrun)")
         from zendar_baselines.bench.unlabelled import run_unlabelled_bench
 
-        return run_unlabelled_bench(context, options.seeds)
+        return run_unlabelled_bench(context, options.seeds, options.scheduler)
     run = RunDirectory(options.out, {"config": config.name, "dataset": context.fingerprint})
     base_inputs = context.step_inputs()
 
@@ -219,9 +219,13 @@ def _run_bench(options: BenchOptions) -> dict[str, Any]:
 
     cfar_chain, cfar_fit, chain_key = chain_step.cfar_chain_step(run, context, split, split_key)
 
+    def cfar_row(step_dir: Path) -> None:
+        with connected(options.scheduler) as cluster:
+            predictions = scoring.cfar_predictions(dataset, cfar_chain, cfar_fit, cluster=cluster)
+        scoring.score_into(step_dir, predictions, root)
+
     rows: list[Row] = []
-    cfar_dir, _, _ = run.step("rows/cfar", {**base_inputs, "chain_fit": chain_key},
-                              lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset, cfar_chain, cfar_fit), root))
+    cfar_dir, _, _ = run.step("rows/cfar", {**base_inputs, "chain_fit": chain_key}, cfar_row)
     rows.append(Row("cfar", METHOD_NAMES["cfar"], False, False, [read_metrics(cfar_dir / "metrics.json")]))
 
     seed_steps = [

@@ -14,6 +14,7 @@ import numpy as np
 from tqdm import tqdm
 
 from zendar_dataset.atomic_files import write_json_atomic
+from zendar_dataset.cluster import DaskCluster
 from zendar_dataset.detection import (
     ChainParams, FramePoints, frame_cube_points, frame_detections, probability_peaks, to_frame,
 )
@@ -47,10 +48,11 @@ PREDICT_BATCH = 8
 
 
 def cfar_predictions(dataset: DatasetIndex | str | os.PathLike, params: ChainParams | None = None,
-                     chain_fit: dict[str, Any] | None = None) -> dict[str, Any]:
+                     chain_fit: dict[str, Any] | None = None, cluster: DaskCluster | None = None) -> dict[str, Any]:
     """Table 1 row 1 on the test split (``dataset``: its root, or the dataset already opened), with the
-    chain's constants ``params`` and the summary of their fit recorded in the meta."""
-    predictions = cfar_baseline.cfar_predictions(dataset_index(dataset), "test", params)
+    chain's constants ``params`` and the summary of their fit recorded in the meta; ``cluster``: one
+    task per scene on a Dask cluster (:func:`zendar_baselines.classical.cfar_baseline.cfar_predictions`)."""
+    predictions = cfar_baseline.cfar_predictions(dataset_index(dataset), "test", params, cluster=cluster)
     if chain_fit is not None:
         predictions["meta"]["chain_fit"] = chain_fit
     return predictions

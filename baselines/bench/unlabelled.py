@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from zendar_dataset.atomic_files import write_json_atomic, write_text_atomic
+from zendar_dataset.cluster import connected
 from zendar_dataset.detection import ChainParams
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import DatasetIndex
@@ -54,12 +55,15 @@ def has_no_labels(index: DatasetIndex) -> bool:
 # --- automatic labels ----------------------------------------------------------------------------
 
 
-def write_auto_labels_with_statistics(dataset: DatasetIndex, scene_ids: list[str], step_dir: Path) -> None:
-    """Automatic masks of ``scene_ids`` (a store in ``step_dir / "store"``) and :data:`STATISTICS_FILE`."""
+def write_auto_labels_with_statistics(dataset: DatasetIndex, scene_ids: list[str], step_dir: Path,
+                                      scheduler: str | None = None) -> None:
+    """Automatic masks of ``scene_ids`` (a store in ``step_dir / "store"``; one task per scene on the Dask
+    cluster of ``scheduler`` when given) and :data:`STATISTICS_FILE`."""
     from zendar_baselines.bench.autolabels import write_auto_labels
     from zendar_baselines.bench.steps import STORE_DIR
 
-    write_auto_labels(dataset, scene_ids, step_dir, quality=False)
+    with connected(scheduler) as cluster:
+        write_auto_labels(dataset, scene_ids, step_dir, quality=False, cluster=cluster)
     write_json_atomic(step_dir / STATISTICS_FILE, label_statistics(step_dir / STORE_DIR, dataset))
 
 
@@ -113,14 +117,16 @@ def markdown_statistics(statistics: dict[str, Any]) -> str:
 # --- CFAR predictions ----------------------------------------------------------------------------
 
 
-def write_cfar_submission(context: RunContext, step_dir: Path) -> None:
+def write_cfar_submission(context: RunContext, step_dir: Path, scheduler: str | None = None) -> None:
     """The CFAR baseline's predictions of the test split, with the chain's default constants, as a
-    leaderboard submission but for :data:`SUBMITTER_FIELDS` (``step_dir / predictions.json``)."""
+    leaderboard submission but for :data:`SUBMITTER_FIELDS` (``step_dir / predictions.json``); one task
+    per scene on the Dask cluster of ``scheduler`` when given."""
     from zendar_baselines.bench.scoring import cfar_predictions
 
     params = ChainParams()
     started = time.perf_counter()
-    predictions = cfar_predictions(context.dataset, params)
+    with connected(scheduler) as cluster:
+        predictions = cfar_predictions(context.dataset, params, cluster=cluster)
     elapsed_s = time.perf_counter() - started
     n_frames = len(predictions["results"])
     predictions["meta"].update({
@@ -179,9 +185,10 @@ def pretrain_seed(context: RunContext, auto_dir: Path, validation_dir: Path | No
 # --- the run -------------------------------------------------------------------------------------
 
 
-def run_unlabelled_bench(context: RunContext, seeds: int) -> dict[str, Any]:
-    """Every step of the module docstring on ``context``'s dataset (reusing finished ones); writes
-    ``results.json`` and ``table.md`` and returns the former's content."""
+def run_unlabelled_bench(context: RunContext, seeds: int, scheduler: str | None = None) -> dict[str, Any]:
+    """Every step of the module docstring on ``context``'s dataset (reusing finished ones; the automatic
+    labels and CFAR predictions one task per scene on the Dask cluster of ``scheduler`` when given);
+    writes ``results.json`` and ``table.md`` and returns the former's content."""
     started = time.monotonic()
     dataset, config = context.dataset, context.config
     train_ids, val_ids, test_ids = (dataset.scene_ids(split) for split in ("train", "val", "test"))
@@ -194,7 +201,7 @@ def run_unlabelled_bench(context: RunContext, seeds: int) -> dict[str, Any]:
     statistics = None
 
     if test_ids:
-        cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: write_cfar_submission(context, d))
+        cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: write_cfar_submission(context, d, scheduler))
         n_frames = len(read_json(cfar_dir / PREDICTIONS_FILE)["results"])
         rows.append(_row("cfar", False, False, done=f"predictions of the {n_frames} test frames",
                          predictions=f"rows/cfar/{PREDICTIONS_FILE}", skipped="scoring", reason=NO_LABELS))
@@ -204,14 +211,14 @@ def run_unlabelled_bench(context: RunContext, seeds: int) -> dict[str, Any]:
     auto_dir = validation_dir = None
     if train_ids:
         auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "scenes": train_ids},
-                                         lambda d: write_auto_labels_with_statistics(dataset, train_ids, d))
+                                         lambda d: write_auto_labels_with_statistics(dataset, train_ids, d, scheduler))
         statistics = read_json(auto_dir / STATISTICS_FILE)
         say("[autolabels] statistics of the training split's automatic labels:\n" + markdown_statistics(statistics))
         validation_key = None
         if val_ids:
             validation_dir, validation_key, _ = run.step(
                 "autolabels_val", {**base_inputs, "scenes": val_ids},
-                lambda d: write_auto_labels_with_statistics(dataset, val_ids, d))
+                lambda d: write_auto_labels_with_statistics(dataset, val_ids, d, scheduler))
     for model_name in config.models:
         rows.append(_row(f"{model_name}-supervised", False, True, skipped="training and scoring",
                          reason=f"{NO_LABELS} to train on"))

@@ -8,20 +8,56 @@ DOA, the SAR static-scene test, DBSCAN clusters, one scored detection per cluste
 from __future__ import annotations
 
 import os
-from typing import Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
 from zendar_dataset.detection import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
+from zendar_dataset.errors import ZendarError
 from zendar_dataset.format import frame_id
-from zendar_dataset.format.reader import DatasetIndex, open_dataset
+from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
+
+from zendar_baselines.fingerprints import dataset_on_worker, task_root
+
+if TYPE_CHECKING:
+    from zendar_dataset.cluster import DaskCluster
 
 METHOD = "cfar-sar-dbscan"
+
+Detections = dict[str, list[dict[str, float]]]
+
+
+@dataclass(frozen=True)
+class CfarSceneTask:
+    """One scene to predict on a Dask worker (picklable; the worker opens the dataset at ``root``)."""
+
+    root: str
+    storage_options: dict = field(hash=False)
+    scene_id: str
+    params: ChainParams
+
+
+def scene_predictions(reader: SceneReader, params: ChainParams) -> Detections:
+    """Frame id -> the CFAR baseline's detections, for every SAR frame of one open scene."""
+    poses = reader.ego_poses()
+    results: Detections = {}
+    for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
+        points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
+        results[frame_id(reader.scene_id, frame_ns)] = frame_detections(points, params)
+    return results
+
+
+def predict_scene(task: CfarSceneTask) -> Detections:
+    """A Dask task: :func:`scene_predictions` of ``task``'s scene, on whichever worker runs it."""
+    index = dataset_on_worker(task.root, task.storage_options, task.scene_id)
+    with index.open_scene(task.scene_id) as reader:
+        return scene_predictions(reader, task.params)
 
 
 def cfar_predictions(
     root: DatasetIndex | str | os.PathLike, split: str, params: ChainParams | None = None, progress: bool = True,
-    storage_options: dict | None = None,
+    storage_options: dict | None = None, cluster: DaskCluster | None = None,
 ) -> dict[str, Any]:
     """The CFAR baseline's predictions for every frame of a split.
 
@@ -36,27 +72,46 @@ def cfar_predictions(
         ``zendar-bench`` passes those it fitted on the run's labelled training scenes, see
         :mod:`zendar_baselines.bench.chain_step`).
     progress : bool
-        Show a progress bar over the frames.
+        Show a progress bar (over the frames; over the scenes on a cluster).
     storage_options : dict, optional
         fsspec options for a remote root.
+    cluster : DaskCluster, optional
+        A connected Dask cluster: one task per scene on its workers, which must read the dataset at
+        the same path or URL (each task says which host cannot). The predictions are the same,
+        in the same order, wherever the scenes ran.
 
     Returns
     -------
     dict
         The evaluator's predictions document ``{"meta": {"method", "split", "parameters"}, "results":
         {frame_id: [{"x", "y", "score"}]}}``; every frame appears, with an empty list where nothing is
-        found. Positions are metres in the ego frame at the frame's timestamp.
+        found, in the split's scene order. Positions are metres in the ego frame at the frame's timestamp.
+
+    Raises
+    ------
+    ZendarError
+        On a cluster: a host that cannot read the dataset, or a scene whose workers died.
     """
     params = ChainParams() if params is None else params
     index = root if isinstance(root, DatasetIndex) else open_dataset(root, storage_options)
     scene_ids = index.scene_ids(split)
-    results: dict[str, list[dict[str, float]]] = {}
-    with tqdm(desc=f"CFAR baseline {split}", unit="frame", disable=not progress) as bar:
-        for scene_id in scene_ids:
-            with index.open_scene(scene_id) as reader:
-                poses = reader.ego_poses()
-                for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
-                    points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
-                    results[frame_id(scene_id, frame_ns)] = frame_detections(points, params)
-                    bar.update(1)
+    per_scene: dict[str, Detections] = {}
+    if cluster is None:
+        with tqdm(desc=f"CFAR baseline {split}", unit="frame", disable=not progress) as bar:
+            for scene_id in scene_ids:
+                with index.open_scene(scene_id) as reader:
+                    per_scene[scene_id] = scene_predictions(reader, params)
+                bar.update(len(per_scene[scene_id]))
+    else:
+        tasks = [CfarSceneTask(task_root(index), dict(index.storage_options), scene_id, params) for scene_id in scene_ids]
+        with tqdm(total=len(tasks), desc=f"CFAR baseline {split}", unit="scene", disable=not progress) as bar:
+
+            def done(task: CfarSceneTask, detections: Detections) -> None:
+                per_scene[task.scene_id] = detections
+                bar.update()
+
+            cluster.run(predict_scene, tasks, shared=None, on_done=done, worker_died=lambda task: ZendarError(
+                f"{task.scene_id}: the Dask workers predicting it died (killed, out of memory, or their node lost) as "
+                "many times as the scheduler allows (distributed.scheduler.allowed-failures)"))
+    results = {fid: detections for scene_id in scene_ids for fid, detections in per_scene[scene_id].items()}
     return {"meta": {"method": METHOD, "split": split, "parameters": params.to_json()}, "results": results}

@@ -162,6 +162,32 @@ def test_automatic_labels_statistics_and_pretraining(label_free_run):
     assert not (out / "rows" / "fpn-resnet34-supervised").exists()
 
 
+def test_the_cfar_predictions_and_automatic_labels_on_a_cluster_are_the_run_in_one_process(label_free_run, tmp_path):
+    """``zendar-bench --scheduler`` on a dataset without labels: the CFAR submission and the automatic
+    labels' scene files and statistics, made one task per scene on 2 Dask workers, equal the run's."""
+    pytest.importorskip("distributed")
+    from distributed import LocalCluster
+
+    from zendar_baselines.bench.configs import get_config
+    from zendar_baselines.bench.context import RunContext
+    from zendar_baselines.bench.unlabelled import STATISTICS_FILE, write_auto_labels_with_statistics, write_cfar_submission
+
+    data, out, _ = label_free_run
+    context = RunContext.open(data, get_config("tiny"), tmp_path / "run", "cpu")
+    (tmp_path / "cfar").mkdir()
+    (tmp_path / "labels").mkdir()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as local:
+        write_cfar_submission(context, tmp_path / "cfar", local.scheduler_address)
+        write_auto_labels_with_statistics(context.dataset, ["drive-train"], tmp_path / "labels", local.scheduler_address)
+    there = json.loads((tmp_path / "cfar" / "predictions.json").read_text())
+    here = json.loads((out / "rows" / "cfar" / "predictions.json").read_text())
+    assert there["results"] == here["results"]
+    assert (tmp_path / "labels" / STATISTICS_FILE).read_bytes() == (out / "autolabels" / STATISTICS_FILE).read_bytes()
+    store_files = sorted(path.name for path in (out / "autolabels" / "store").glob("*.npz"))
+    assert store_files and all((tmp_path / "labels" / "store" / name).read_bytes()
+                               == (out / "autolabels" / "store" / name).read_bytes() for name in store_files)
+
+
 def test_a_second_run_reuses_every_step_and_verify_refuses(label_free_run, capsys):
     from zendar_baselines.bench.cli import main
     from zendar_baselines.bench.configs import Schedule, get_config
