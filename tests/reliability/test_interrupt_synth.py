@@ -136,6 +136,28 @@ def test_an_interrupt_wrapped_or_swallowed_by_the_command_still_exits_130(capsys
     assert "interrupted" not in capsys.readouterr().err
 
 
+def test_an_interrupt_inside_a_callback_from_c_is_raised_after_it_without_a_traceback(capsys):
+    """Ctrl-C landing in a Python callback that C code runs (as llvmlite's, while numba compiles) cannot
+    propagate from it; it is raised at the next line after the callback, and nothing is printed but
+    "interrupted"."""
+    import ctypes
+
+    reached = []
+    callback = ctypes.CFUNCTYPE(None)(lambda: os.kill(os.getpid(), signal.SIGINT))
+    hook = sys.unraisablehook
+
+    def body():
+        callback()
+        reached.append("after the callback")  # the interrupt is raised before the next line
+        time.sleep(1.0)
+        reached.append("too far")
+
+    assert run_cli(body) == 130
+    assert reached == [] or reached == ["after the callback"]
+    assert capsys.readouterr().err == "interrupted\n"
+    assert sys.unraisablehook is hook
+
+
 def test_an_interrupt_inside_a_compiled_kernel_is_a_keyboard_interrupt_not_a_scene_failure(tmp_path, monkeypatch):
     def interrupted_kernel(*args, **kwargs):
         try:

@@ -21,12 +21,15 @@ otherwise kill the process by signal instead of letting the status stand).
 
 from __future__ import annotations
 
+import _thread
 import logging
 import os
 import signal
+import sys
 import threading
 import functools
 from collections.abc import Callable, Iterator
+from typing import Any
 from contextlib import contextmanager
 
 EXIT_INTERRUPTED = 130
@@ -46,6 +49,22 @@ def _raise_interrupt(signum: int, frame: object) -> None:
         return  # a second Ctrl-C must not cut the cleanup of the first short
     _interrupted = True
     raise KeyboardInterrupt
+
+
+def _interrupt_in_callback(previous_hook: Callable[[Any], None], unraisable: Any) -> None:
+    """``sys.unraisablehook`` within :func:`interrupts_raise`.
+
+    A Ctrl-C that lands in a Python callback run by C code (llvmlite's object-cache notice while numba
+    compiles) cannot propagate from there: Python would print it, traceback and all, and carry on. It is
+    raised again 10 ms later, from another thread (raised from here it would land in the callback again),
+    which the callback has left by then (else this repeats); anything else goes to ``previous_hook``.
+    """
+    global _interrupted
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        _interrupted = False
+        threading.Timer(0.01, _thread.interrupt_main).start()
+        return
+    previous_hook(unraisable)
 
 
 def _install(handler) -> object:
@@ -94,6 +113,8 @@ def interrupts_raise() -> Iterator[None]:
         return
     _interrupted = False
     previous = _install(_raise_interrupt)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_interrupt_in_callback, previous_hook)
     try:
         yield
     except KeyboardInterrupt:
@@ -109,6 +130,7 @@ def interrupts_raise() -> Iterator[None]:
             _quiet_abandoned_io()
             raise KeyboardInterrupt
     finally:
+        sys.unraisablehook = previous_hook
         signal.signal(signal.SIGINT, previous)
 
 
