@@ -9,6 +9,7 @@ from typing import Any
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
 
 from zendar_baselines.bench.configs import BenchConfig
+from zendar_baselines.bench.scoring import ScoringScenes
 from zendar_baselines.classical.kept_scenes import KeptScenes
 from zendar_baselines.cnn.input_channels import InputChannels
 from zendar_baselines.code_version import code_version
@@ -18,9 +19,9 @@ from zendar_baselines.labels.splits import SemiSupervisedSplit
 #: Under the run directory: memory-mapped log-power maps shared by every row's training.
 INPUTS_DIR = "inputs"
 
-#: This process's kept training and validation scenes, per dataset (root and fingerprint):
-#: :meth:`RunContext.kept_scenes`.
-_KEPT_SCENES: dict[tuple[Path, str], KeptScenes] = {}
+#: This process's kept scenes, per dataset (root and fingerprint) and use: the training and validation
+#: scenes (:meth:`RunContext.kept_scenes`) and the test scenes (:meth:`RunContext.scoring_scenes`).
+_KEPT_SCENES: dict[tuple[Path, str, str], KeptScenes] = {}
 
 
 @dataclass(frozen=True)
@@ -69,12 +70,19 @@ class RunContext:
 
     def kept_scenes(self) -> KeptScenes:
         """This process's training and validation scenes, opened once for every seed's passes: the
-        training windows and the chain fit (:class:`~zendar_baselines.classical.kept_scenes.KeptScenes`;
-        the test split's are the scorings' :class:`~zendar_baselines.bench.scoring.ScoringScenes`)."""
-        key = (self.root, self.fingerprint)
+        training windows and the chain fit (:class:`~zendar_baselines.classical.kept_scenes.KeptScenes`)."""
+        key = (self.root, self.fingerprint, "train+val")
         if key not in _KEPT_SCENES:
             scene_ids = [s for split in ("train", "val") if split in self.dataset.splits for s in self.dataset.scene_ids(split)]
             _KEPT_SCENES[key] = KeptScenes(self.dataset, scene_ids)
+        return _KEPT_SCENES[key]
+
+    def scoring_scenes(self) -> ScoringScenes:
+        """This process's test scenes, opened once for every seed's scoring
+        (:class:`~zendar_baselines.bench.scoring.ScoringScenes`)."""
+        key = (self.root, self.fingerprint, "test")
+        if key not in _KEPT_SCENES:
+            _KEPT_SCENES[key] = ScoringScenes(self.dataset)
         return _KEPT_SCENES[key]
 
     def step_inputs(self) -> dict[str, Any]:
@@ -83,7 +91,8 @@ class RunContext:
 
 
 def close_kept_scenes() -> None:
-    """Close every scene :meth:`RunContext.kept_scenes` kept open in this process (at the end of a run)."""
+    """Close every scene :meth:`RunContext.kept_scenes` and :meth:`RunContext.scoring_scenes` kept open
+    in this process (at the end of a run, and in the main process before the seed workers start)."""
     for scenes in _KEPT_SCENES.values():
         scenes.close()
     _KEPT_SCENES.clear()

@@ -174,7 +174,7 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 def _train_seed_here(step: SeedStep) -> None:
     """A rank other than 0: its part of ``step``'s seed (:func:`_train_and_score`; the files are rank 0's)."""
     context = replace(step.context, progress=False)
-    _train_and_score(context, step.labels, step.row, Path(context.run_path) / step.name, _process_scenes(context),
+    _train_and_score(context, step.labels, step.row, Path(context.run_path) / step.name, context.scoring_scenes(),
                      ranks.SceneShard.here())
 
 
@@ -278,8 +278,6 @@ def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> 
     tolerance, docs/cluster.md): training uses
     :data:`zendar_baselines.cnn.training.TRAINING_THREADS` threads either way, and each step writes
     only its own directory."""
-    from zendar_baselines.bench.scoring import ScoringScenes
-
     todo = []
     for step in seed_steps:
         if run.is_done(step.name, step.inputs):
@@ -291,12 +289,12 @@ def run_seed_steps(run: RunDirectory, seed_steps: list[SeedStep], jobs: int) -> 
         ranks.hand_out(todo)  # the other ranks train each of these seeds with this one
     if jobs <= 1 or len(todo) <= 1 or distributed:
         shard = ranks.SceneShard.here() if distributed else None
-        with ScoringScenes(seed_steps[0].context.dataset) as test_scenes:
-            for step in todo:
-                run.step(step.name, step.inputs,
-                         lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes, shard))
-                if distributed:
-                    ranks.barrier()
+        test_scenes = seed_steps[0].context.scoring_scenes()  # closed with the run (close_kept_scenes)
+        for step in todo:
+            run.step(step.name, step.inputs,
+                     lambda d, s=step: _train_and_score(s.context, s.labels, s.row, d, test_scenes, shard))
+            if distributed:
+                ranks.barrier()
         return
     # Longest first, so that the seeds left running alone at the end are short: pretrained seeds train
     # twice, and the later architectures of the config are the slower ones (a DenseNet-67 seed took
@@ -317,24 +315,10 @@ def _never(step_dir: Path) -> None:
     raise AssertionError(f"{step_dir}: a finished step was run again")
 
 
-#: A worker process's test scenes, opened by its first seed and kept for the next (:class:`ScoringScenes`).
-_WORKER_SCENES: dict[Path, ScoringScenes] = {}
-
-
-def _process_scenes(context: RunContext) -> ScoringScenes:
-    """This process's test scenes, opened by its first seed and kept for the next."""
-    from zendar_baselines.bench.scoring import ScoringScenes
-
-    scenes = _WORKER_SCENES.get(context.root)
-    if scenes is None:
-        scenes = _WORKER_SCENES[context.root] = ScoringScenes(context.dataset)
-    return scenes
-
-
 def _run_seed_step(step: SeedStep) -> None:
     context = replace(step.context, progress=False)  # one bar in the parent counts the seeds
     run = RunDirectory(context.run_path, step.identity)
-    run.step(step.name, step.inputs, lambda d: _train_and_score(context, step.labels, step.row, d, _process_scenes(context)))
+    run.step(step.name, step.inputs, lambda d: _train_and_score(context, step.labels, step.row, d, context.scoring_scenes()))
 
 
 def _train_and_score(context: RunContext, labels: TrainingLabels, row: RowSeed, out_dir: Path,

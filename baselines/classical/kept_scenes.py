@@ -58,8 +58,9 @@ class KeptScenes:
     dataset : DatasetIndex, str or path
         The dataset (opened, or its root).
     scene_ids : list of str
-        The scenes that may be kept: their sizes decide whether they fit :data:`KEPT_SCENE_BYTES`
-        (checked at the first open). Any other scene of the dataset is opened for its pass only.
+        The scenes that may be kept: at the first :meth:`opened`, all of them are opened once and kept
+        if their sizes fit :data:`KEPT_SCENE_BYTES` together (else closed again). Any other scene of
+        the dataset is opened for its pass only.
     keep : bool
         Keep the scenes (within the budget); False opens every scene for its pass only.
     maps_too : bool
@@ -70,7 +71,6 @@ class KeptScenes:
                  maps_too: bool = False) -> None:
         self.index = dataset_index(dataset)
         self.keep = keep
-        self._kept_ids = frozenset(scene_ids)
         self._budget_ids = list(scene_ids)
         self._maps_too = maps_too
         self._checked = False
@@ -87,16 +87,27 @@ class KeptScenes:
         """Close every kept scene (a later pass opens them again)."""
         self._scenes.clear()
         self._stack.close()
+        self._checked = False
 
-    def _fits(self) -> bool:
-        total = 0
-        for scene_id in self._budget_ids:
-            with self.index.open_scene(scene_id) as reader:
-                arrays = [f"sar/{s}/image" for s in reader.sensors("sar")]
-                if self._maps_too:
-                    arrays += [f"radar/{r}/cube" for r in reader.sensors("radar")]
-                total += sum(4 * int(np.prod(reader.array(a).shape)) for a in arrays)
-        return total <= KEPT_SCENE_BYTES
+    def _scene_bytes(self, reader: SceneReader) -> int:
+        arrays = [f"sar/{s}/image" for s in reader.sensors("sar")]
+        if self._maps_too:
+            arrays += [f"radar/{r}/cube" for r in reader.sensors("radar")]
+        return sum(4 * int(np.prod(reader.array(a).shape)) for a in arrays)
+
+    def _keep_all_if_they_fit(self) -> None:
+        """Open every scene of the budget once: kept if together they fit it, else closed again and
+        ``keep`` turned off (each pass then opens its scenes)."""
+        readers, total = {}, 0
+        with contextlib.ExitStack() as opened:
+            for scene_id in self._budget_ids:
+                readers[scene_id] = opened.enter_context(self.index.open_scene(scene_id))
+                total += self._scene_bytes(readers[scene_id])
+                if total > KEPT_SCENE_BYTES:
+                    self.keep = False
+                    return  # the ``with`` closes them
+            self._stack.enter_context(opened.pop_all())
+        self._scenes = {scene_id: KeptScene(reader, keep_all_frames=True) for scene_id, reader in readers.items()}
 
     @contextlib.contextmanager
     def opened(self, scene_id: str) -> Iterator[KeptScene]:
@@ -107,11 +118,9 @@ class KeptScenes:
             return
         if self.keep and not self._checked:
             self._checked = True
-            self.keep = self._fits()
-        if self.keep and scene_id in self._kept_ids:
-            reader = self._stack.enter_context(self.index.open_scene(scene_id))
-            self._scenes[scene_id] = KeptScene(reader, keep_all_frames=True)
-            yield self._scenes[scene_id]
-            return
+            self._keep_all_if_they_fit()
+            if scene_id in self._scenes:
+                yield self._scenes[scene_id]
+                return
         with self.index.open_scene(scene_id) as reader:
             yield KeptScene(reader, keep_all_frames=False)

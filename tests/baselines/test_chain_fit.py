@@ -319,7 +319,8 @@ def _frames_equal(got, expected) -> None:
 
 def test_kept_scenes_give_the_frames_of_fresh_ones_opening_each_scene_once(tiny_root, monkeypatch, tmp_path):
     """Passes over kept scenes (readers, poses, SAR magnitudes kept) give the frames of scenes opened
-    afresh; the second pass opens no scene; over the budget every pass opens them again."""
+    afresh; each scene is opened once, the second pass opens none; over the budget every pass opens
+    them again."""
     from zendar_baselines.classical import kept_scenes
 
     index = open_dataset(str(tiny_root))
@@ -336,7 +337,7 @@ def test_kept_scenes_give_the_frames_of_fresh_ones_opening_each_scene_once(tiny_
     with kept_scenes.KeptScenes(index, scenes) as kept:
         first = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=kept)
         n_first = len(opens)
-        assert n_first == 2 * len(scenes)  # the budget's look at each scene's sizes, then the scene kept
+        assert sorted(opens) == sorted(scenes)  # each opened once: its sizes read for the budget, then kept
         second = labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False, scenes=kept)
         assert len(opens) == n_first  # nothing opened again
         with kept.opened(scenes[0]) as scene:
@@ -357,3 +358,28 @@ def test_kept_scenes_give_the_frames_of_fresh_ones_opening_each_scene_once(tiny_
     with pytest.raises(ValueError, match="scenes of"):
         labelled_frames(index, scenes, cfar_cells_for(ChainParams()), progress=False,
                         scenes=kept_scenes.KeptScenes(str(tmp_path), []))
+
+
+def test_a_process_keeps_one_set_of_each_split_s_scenes_until_the_run_closes_them(tiny_root, tmp_path):
+    """``RunContext.kept_scenes`` (training and validation) and ``scoring_scenes`` (test) are one
+    registry per process: every seed of a dataset gets the same instances, other contexts of the same
+    dataset too, and ``close_kept_scenes`` closes both kinds (a later call opens afresh)."""
+    from zendar_baselines.bench.context import close_kept_scenes
+    from zendar_baselines.bench.scoring import ScoringScenes
+
+    config = get_config("tiny")
+    context = RunContext.open(tiny_root, config, tmp_path / "out", "cpu")
+    other_run = RunContext.open(tiny_root, config, tmp_path / "other", "cpu")
+    kept, scoring = context.kept_scenes(), context.scoring_scenes()
+    assert isinstance(scoring, ScoringScenes) and type(kept) is not ScoringScenes
+    assert other_run.kept_scenes() is kept and other_run.scoring_scenes() is scoring
+    test_scene = scoring.scene_ids()[0]
+    with scoring.opened(test_scene) as scene:
+        assert scene.reader.scene_id == test_scene
+    with kept.opened(open_dataset(str(tiny_root)).scene_ids("train")[0]) as scene:
+        held = scene
+    close_kept_scenes()
+    assert context.kept_scenes() is not kept and context.scoring_scenes() is not scoring
+    with kept.opened(held.reader.scene_id) as scene:
+        assert scene is not held  # the closed instance opens afresh
+    close_kept_scenes()
