@@ -1,10 +1,14 @@
-"""``zendar-bench --ablations``: what two of the chain's changes moved, and what optional input
+"""``zendar-bench --ablations``: what three of the chain's changes moved, and what optional input
 channels add, measured as rows beside Table 1.
 
 - ``sar-reading-alone``: the CFAR row with the SAR test as it was before the range-Doppler SNR was
   subtracted (a point's SAR value is its SAR reading alone, dB over the image median:
   :attr:`zendar_dataset.detection.SarTestParams.subtract_rd_snr` False), its threshold, radius and
   offset fitted the same way on the same labelled frames. Reference: the CFAR row.
+- ``no-radar-shadow``: the CFAR row with the SAR test judging points in the radar's shadow like any
+  other (:attr:`zendar_dataset.detection.SarTestParams.shadow_margin_m` None; the shadow is measured
+  by the lidar, :mod:`zendar_dataset.sar.shadow`): the paper's test, which calls the multipath ghosts
+  behind facades dynamic. Fitted the same way. Reference: the CFAR row.
 - ``cfar-gated-targets``: :data:`ABLATION_MODEL` supervised-only, trained on the manual-label targets
   as they were before the box projection (MOVING only at CFAR peaks inside a labelled box and their
   grown segments: ``MaskParams(manual_targets="cfar-peaks")``), its checkpoints chosen on validation
@@ -30,7 +34,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from zendar_dataset.detection import ChainParams
+from zendar_dataset.detection import ChainParams, SarTestParams
 from zendar_dataset.eval.paired import FAILS, HOLDS, paired_difference
 from zendar_dataset.eval.protocol import RANGE_BANDS
 from zendar_dataset.eval.report import read_metrics
@@ -52,6 +56,14 @@ INPUT_CHANNEL_ABLATIONS = {
         InputChannels(static_doppler=True),
         "input: + the Doppler test's residual of every cell (1 channel per map)"),
 }
+#: The CFAR row's ablations of the SAR test: name, the test's settings, the detector's name in the
+#: fit, what the row changes.
+CFAR_SAR_TEST_ABLATIONS = (
+    ("sar-reading-alone", replace(SarTestParams(), subtract_rd_snr=False), "CFAR (SAR reading alone)",
+     "SAR test: the SAR reading alone (no range-Doppler SNR subtracted)"),
+    ("no-radar-shadow", replace(SarTestParams(), shadow_margin_m=None), "CFAR (no radar shadow)",
+     "SAR test: points in the radar's shadow behind lidar obstacles judged like any other (the paper's test)"),
+)
 #: Where the ablations' steps live in the run directory.
 ABLATIONS_DIR = "ablations"
 #: What a comparison's interval says, by the paired verdict of ablation − reference.
@@ -89,27 +101,15 @@ def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels
     jobs
         ``--jobs`` (:func:`zendar_baselines.bench.run.seed_jobs`).
     """
-    from zendar_baselines.bench import chain_step, scoring, steps
+    from zendar_baselines.bench import steps
     from zendar_baselines.bench.run import SeedStep, run_seed_steps, seed_jobs
-    from zendar_baselines.classical.chain_fit import cfar_cells_for
 
     base_inputs = context.step_inputs()
-    dataset = context.dataset
     ablations = []
 
-    # The SAR test without the SNR subtraction, on the CFAR row.
-    name = "sar-reading-alone"
-    base = replace(ChainParams(), sar=replace(ChainParams().sar, subtract_rd_snr=False))
-    fit_dir, fit_key, _ = run.step(
-        f"{ABLATIONS_DIR}/{name}/chain_fit", {**base_inputs, "split": keys["split"], "ablation": name},
-        lambda d: chain_step.write_chain_fit(context, labels.split, "CFAR (SAR reading alone)", cfar_cells_for(base), base, d))
-    params, fit = chain_step.read_chain_fit(fit_dir)
-    row_dir, _, _ = run.step(
-        f"{ABLATIONS_DIR}/{name}/row", {**base_inputs, "chain_fit": fit_key, "ablation": name},
-        lambda d: scoring.score_into(d, scoring.cfar_predictions(dataset, params, fit), context.root))
-    ablations.append(Ablation(name, "SAR test: the SAR reading alone (no range-Doppler SNR subtracted)", "cfar",
-                              Row(f"cfar-{name}", METHOD_NAMES["cfar"], False, False, [read_metrics(row_dir / "metrics.json")]),
-                              f"{ABLATIONS_DIR}/{name}/row"))
+    # The SAR test as it was before two of its changes, on the CFAR row.
+    for name, sar, detector, change in CFAR_SAR_TEST_ABLATIONS:
+        ablations.append(_cfar_ablation(run, context, labels, keys, name, replace(ChainParams(), sar=sar), detector, change))
 
     # CFAR-gated manual-label targets, on the supervised-only row.
     name = "cfar-gated-targets"
@@ -160,6 +160,25 @@ def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels
                 [read_metrics(run.path / step.name / "metrics.json") for step in named]),
             named[0].name))
     return ablations
+
+
+def _cfar_ablation(run: RunDirectory, context: RunContext, labels: TrainingLabels, keys: dict[str, str], name: str,
+                   base: ChainParams, detector: str, change: str) -> Ablation:
+    """The CFAR row with the chain's settings ``base``: its constants fitted the same way on the same
+    labelled frames, its predictions scored on the test split."""
+    from zendar_baselines.bench import chain_step, scoring
+    from zendar_baselines.classical.chain_fit import cfar_cells_for
+
+    base_inputs = context.step_inputs()
+    fit_dir, fit_key, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/chain_fit", {**base_inputs, "split": keys["split"], "ablation": name},
+        lambda d: chain_step.write_chain_fit(context, labels.split, detector, cfar_cells_for(base), base, d))
+    params, fit = chain_step.read_chain_fit(fit_dir)
+    row_dir, _, _ = run.step(
+        f"{ABLATIONS_DIR}/{name}/row", {**base_inputs, "chain_fit": fit_key, "ablation": name},
+        lambda d: scoring.score_into(d, scoring.cfar_predictions(context.dataset, params, fit), context.root))
+    return Ablation(name, change, "cfar", Row(f"cfar-{name}", METHOD_NAMES["cfar"], False, False,
+                                             [read_metrics(row_dir / "metrics.json")]), f"{ABLATIONS_DIR}/{name}/row")
 
 
 def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation]) -> list[dict[str, Any]]:

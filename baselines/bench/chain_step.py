@@ -116,13 +116,16 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
         if document["format"] != FORMAT_NAME or document["format_version"] != FORMAT_VERSION:
             raise KeyError("format")
         fitted = {name: document["fitted"][name] for name in FITTED}
-        # Not fitted: the SAR value's definition (False only in the ablation of the SNR subtraction).
+        # Not fitted: the SAR value's definition (the SNR subtraction and the radar's shadow, changed
+        # only in their ablations; a file from before the shadow was fitted without it).
         subtract_rd_snr = document["parameters"]["sar"].get("subtract_rd_snr", True)
+        shadow_margin_m = document["parameters"]["sar"].get("shadow_margin_m")
         summary = document["summary"]
     except (KeyError, TypeError) as exc:
         raise ZendarError(f"{path}: not a {FORMAT_NAME} file of version {FORMAT_VERSION} ({exc!r} missing)") from None
     base = ChainParams()
-    params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"], subtract_rd_snr=subtract_rd_snr),
+    params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"], subtract_rd_snr=subtract_rd_snr,
+                                       shadow_margin_m=shadow_margin_m),
                      cluster_eps_m=fitted["cluster_eps_m"],
                      centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"])
     return params, summary

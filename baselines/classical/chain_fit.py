@@ -139,6 +139,12 @@ class LabelledFrames:
         return np.concatenate([np.zeros(0, bool)] + [self.on_car[fid] for fid in self.points])
 
     @property
+    def point_ahead(self) -> np.ndarray:
+        """``[P]`` bool, aligned with :attr:`sar_db`: the point lies ahead of the ego's front bumper
+        (x > 0 in its frame), where the labels cover every car."""
+        return np.concatenate([np.zeros(0, bool)] + [points.points_xy[:, 0] > 0.0 for points in self.points.values()])
+
+    @property
     def point_range_m(self) -> np.ndarray:
         """``[P]`` float64, aligned with :attr:`sar_db`."""
         return np.concatenate([np.zeros(0)] + [self.range_m[fid] for fid in self.points])
@@ -286,8 +292,11 @@ def separation_auc(on_car: np.ndarray, sar_db: np.ndarray) -> float | None:
 
 
 def point_separation(frames: LabelledFrames) -> dict[str, Any]:
-    """How well the SAR value separates the points on labelled cars from the others (:func:`separation_of`)."""
-    return separation_of(frames.point_on_car, frames.sar_db, frames.point_range_m)
+    """How well the SAR value separates the points on labelled cars from the others (:func:`separation_of`),
+    over the points ahead of the ego's front bumper (x > 0 in the frame): only there do the labels say
+    which points are on a car (a car beside the ego is never labelled, its points are no "others")."""
+    ahead = frames.point_ahead
+    return separation_of(frames.point_on_car[ahead], frames.sar_db[ahead], frames.point_range_m[ahead])
 
 
 def separation_of(on_car: np.ndarray, sar_db: np.ndarray, range_m: np.ndarray) -> dict[str, Any]:

@@ -21,6 +21,10 @@ sensor whose reading is brightest. Candidates (dB; low says "on a car"):
   dB) or SNR (over the CA-CFAR noise estimate, dB): the value of ``sar_db_at``;
 - ``local_4m_minus_power``, ``local_4m_minus_snr``, ``same_range_minus_snr``: combinations.
 
+Points the chain leaves unjudged because they lie in the radar's shadow
+(:mod:`zendar_dataset.sar.shadow`) are left out of every candidate, and only points ahead of the
+ego's front bumper are counted, where the labels cover every car (as the chain fit counts them).
+
 Prints a markdown table of ROC AUC per band and overall for each split.
 """
 
@@ -124,11 +128,13 @@ def candidate_values(root: str | os.PathLike, split: str, params: ChainParams | 
     Returns
     -------
     dict of str to numpy.ndarray
-        ``[P]`` arrays: each of :data:`CANDIDATES` (float64 dB), ``on_car`` (bool), ``range_m`` (float64).
+        ``[P]`` arrays: each of :data:`CANDIDATES` (float64 dB), ``on_car`` (bool), ``range_m`` (float64),
+        ``ahead`` (bool: ahead of the ego's front bumper, where the labels cover every car; the AUCs
+        count only these points, as the chain fit does).
     """
     params = ChainParams() if params is None else params
     index = open_dataset(root)
-    columns: dict[str, list[np.ndarray]] = {name: [] for name in (*CANDIDATES, "on_car", "range_m")}
+    columns: dict[str, list[np.ndarray]] = {name: [] for name in (*CANDIDATES, "on_car", "range_m", "ahead")}
     for scene_id in index.scene_ids(split):
         with index.open_scene(scene_id) as reader:
             if reader.labels() is not None:
@@ -162,7 +168,9 @@ def _scene_candidates(reader, params: ChainParams, columns: dict[str, list[np.nd
             for name, values in per_cube[key].items():
                 columns[name].append(values)
             columns["on_car"].append(boxes.moved_to(cube.timestamp_ns, poses).contains(cube.points_ego[:, :2], ON_CAR_MARGIN_M).any(axis=1))
-            columns["range_m"].append(np.hypot(*to_frame(cube, poses, frame_ns).points_xy.T))
+            in_frame = to_frame(cube, poses, frame_ns).points_xy
+            columns["range_m"].append(np.hypot(*in_frame.T))
+            columns["ahead"].append(in_frame[:, 0] > 0.0)
 
 
 def _cube_key(timestamp_ns: int, radar_ego) -> tuple:
@@ -182,6 +190,9 @@ def _cube_candidates(cube, statistics: _ImageStatistics, maps: tuple[np.ndarray,
     power_db = 10.0 * np.log10(power[cube.range_bin, cube.doppler_bin])
     snr_db = power_db - 10.0 * np.log10(noise[cube.range_bin, cube.doppler_bin])
     reading = best["peak"]
+    # Points in the radar's shadow (the chain's value is NaN though the image covers them and the SNR
+    # is finite) are judged by no candidate, as the chain judges none.
+    reading = np.where(np.isnan(cube.sar_db) & np.isfinite(reading) & np.isfinite(snr_db), np.nan, reading)
     return {
         "reading": reading, "local_1m": reading - best["local_1m"], "local_2m": reading - best["local_2m"],
         "local_4m": reading - best["local_4m"], "same_range": reading - best["same_range"],
@@ -198,7 +209,7 @@ def auc_table(values: dict[str, np.ndarray]) -> dict[str, dict[str, float | None
         row = {}
         for band in (*RANGE_BANDS, ALL_BAND):
             low, high = BANDS_M[band]
-            keep = (values["range_m"] >= low) & (values["range_m"] < high) & np.isfinite(values[name])
+            keep = (values["range_m"] >= low) & (values["range_m"] < high) & np.isfinite(values[name]) & values["ahead"]
             truth = values["on_car"][keep]
             row[band] = float(roc_auc_score(truth, -values[name][keep])) if 0 < truth.sum() < truth.size else None
         table[name] = row

@@ -266,9 +266,10 @@ def _seed_record(run: Path, key: str) -> dict:
 
 
 def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(quick_run, tmp_path):
-    """``--ablations`` on a finished run: Table 1's steps are reused, the two ablation rows are made
-    (the CFAR row with the SAR reading alone, FPN ResNet-34 supervised on CFAR-gated targets), and
-    each difference on all frames is the two rows' AP as the evaluator scored them."""
+    """``--ablations`` on a finished run: Table 1's steps are reused, the ablation rows are made (the
+    CFAR row with the SAR reading alone and without the radar's shadow, FPN ResNet-34 supervised on
+    CFAR-gated targets and with extra input channels), and each difference on all frames is the two
+    rows' AP as the evaluator scored them."""
     home, _ = quick_run
     copy = tmp_path / "copy"
     subprocess.run(["cp", "-a", str(home / "out"), str(copy)], check=True)
@@ -277,8 +278,8 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     assert "[rows/cfar] reused" in done.stderr and "fpn-resnet34 supervised seed 0" in done.stderr
     results = json.loads((copy / "results.json").read_text())
     assert [a["ablation"] for a in results["ablations"]] == [
-        "sar-reading-alone", "cfar-gated-targets", "phase-difference-channels", "static-doppler-channel"]
-    assert [a["reference"] for a in results["ablations"]] == ["cfar", *["fpn-resnet34-supervised"] * 3]
+        "sar-reading-alone", "no-radar-shadow", "cfar-gated-targets", "phase-difference-channels", "static-doppler-channel"]
+    assert [a["reference"] for a in results["ablations"]] == ["cfar", "cfar", *["fpn-resnet34-supervised"] * 3]
     for ablation in results["ablations"]:
         row_ap = json.loads((copy / ablation["row"]["metrics"]).read_text())["ap"]
         reference_ap = json.loads((copy / "rows" / ablation["reference"] / "metrics.json").read_text())["ap"]
@@ -287,7 +288,10 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
                 assert comparison["difference"] == pytest.approx(row_ap[band] - reference_ap[band], abs=1e-4)
             assert comparison["reading"] in ("higher", "lower", "no difference shown")
     meta = json.loads((copy / "ablations" / "sar-reading-alone" / "row" / "predictions.json").read_text())["meta"]
-    assert meta["parameters"]["sar"]["value"] == "SAR reading"
+    assert meta["parameters"]["sar"]["value"] == "SAR reading" and meta["parameters"]["sar"]["shadow_margin_m"] > 0
+    meta = json.loads((copy / "ablations" / "no-radar-shadow" / "row" / "predictions.json").read_text())["meta"]
+    assert meta["parameters"]["sar"]["shadow_margin_m"] is None
+    assert meta["parameters"]["sar"]["value"] == "SAR reading minus range-Doppler SNR"
     store = json.loads((copy / "ablations" / "cfar-gated-targets" / "label_masks" / "store" / "manifest.json").read_text())
     assert store["parameters"]["manual_targets"] == "cfar-peaks"
     # The channel rows' models read their own inputs: 4 antennas' log power and 6 phase channels, or 1

@@ -31,6 +31,7 @@ from zendar_baselines.classical.chain_fit import (
     fit_chain_params,
     fit_on_frames,
     labelled_frames,
+    point_separation,
 )
 from zendar_baselines.cnn.maps import log_power_maps
 from zendar_baselines.labels.splits import make_split
@@ -383,3 +384,18 @@ def test_a_process_keeps_one_set_of_each_split_s_scenes_until_the_run_closes_the
     with kept.opened(held.reader.scene_id) as scene:
         assert scene is not held  # the closed instance opens afresh
     close_kept_scenes()
+
+
+def test_the_separation_counts_only_points_ahead_of_the_front_bumper():
+    """A car beside the ego is never labelled: its points, dynamic-looking, would count as "others"
+    read dynamic. Only the points ahead (x > 0) are judged."""
+    points = FramePoints(
+        points_xy=np.array([(10.0, 0.0), (10.0, 5.0), (12.0, -4.0), (-1.0, 4.0), (0.0, 6.0)]), radar_xy=np.zeros((5, 2)),
+        score=np.ones(5), sar_db=np.array([-5.0, 30.0, 25.0, -6.0, -4.0]), dynamic=np.zeros(5, bool),
+    )
+    on_car = np.array([True, False, False, False, False])
+    frames = LabelledFrames({"f": points}, {"f": np.array([[10.0, 0.0]])}, {"f": on_car},
+                            {"f": np.hypot(*points.points_xy.T)}, {"s": ["f"]})
+    separation = point_separation(frames)
+    assert separation["auc"] == 1.0 and separation["points_per_band"]["near"] == {"on_car": 1, "other": 2}
+    np.testing.assert_array_equal(frames.point_ahead, [True, True, True, False, False])

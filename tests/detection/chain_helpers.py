@@ -107,3 +107,26 @@ def sar_frame(poses: EgoPoses, corner_ego_xy, pixel_m: float, shape: tuple[int, 
 def sar_frames(**frames: dict[str, np.ndarray]) -> SarFrames:
     """:class:`SarFrames` over the given per-sensor frames (:func:`sar_frame`)."""
     return SarFrames(SarReader(frames))
+
+
+class LidarReader:
+    """Just what :class:`~zendar_dataset.sar.shadow.RadarShadow` reads from a scene: lidar ``top``
+    with one sweep at :data:`T0_NS`, ``points_lidar`` ``[P, 3]`` in its frame (axes along the ego's,
+    origin ``lidar_ego``), on the parked ego (:func:`parked_poses`)."""
+
+    def __init__(self, points_lidar: np.ndarray, lidar_ego) -> None:
+        self.points = np.asarray(points_lidar, np.float32)
+        self.calibration = type("Calibration", (), {"sensors": {
+            "top": {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [float(v) for v in lidar_ego]}}})()
+
+    def sensors(self, group: str) -> list[str]:
+        return ["top"] if group == "lidar" else []
+
+    def timestamps(self, stream: str) -> np.ndarray:
+        return np.array([T0_NS], np.int64)
+
+    def lidar_sweeps(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
+        return self.points, np.array([0, len(self.points)], np.int64)
+
+    def ego_poses(self) -> EgoPoses:
+        return parked_poses()

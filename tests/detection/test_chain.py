@@ -7,6 +7,8 @@ baseline's predictions are accepted by the official evaluator with every frame o
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import math
 
@@ -105,6 +107,23 @@ def test_one_detection_per_cluster_with_dynamic_points_pushed_along_the_line_of_
     assert (by_x[1]["x"], by_x[1]["y"]) == pytest.approx(tuple(expected))
     assert by_x[1]["score"] == pytest.approx(2.0 * 0.5)  # half its points dynamic
     assert frame_detections(FramePoints.concatenate([])) == []
+
+
+def test_detections_beside_or_behind_the_front_bumper_are_dropped_unless_asked_for():
+    """The labels hold only cars whose centre is ahead of the front bumper (x > 0): a car passing
+    beside the ego is never labelled, so its detection would be a false positive to the evaluator.
+    The test is on the corrected centre: a cluster just behind the bumper, pushed ahead along its line
+    of sight from a radar at the back, is kept."""
+    radar = np.array([[-4.0, 0.0]])
+    points = FramePoints(
+        points_xy=np.array([(20.0, 0.0), (-1.0, 3.0), (-1.0, -3.0), (-0.5, 0.0)]), radar_xy=np.repeat(radar, 4, axis=0),
+        score=np.ones(4), sar_db=np.zeros(4), dynamic=np.ones(4, bool),
+    )
+    params = ChainParams(centre_offset_m=1.0)
+    kept = frame_detections(points, params)
+    assert sorted(round(d["x"], 6) for d in kept) == [0.5, 21.0]  # (-0.5, 0) moves 1 m along +x; the two beside are dropped
+    assert len(frame_detections(points, dataclasses.replace(params, ahead_only=False))) == 4
+    assert ChainParams().to_json()["ahead_only"] is True
 
 
 def test_probability_peaks_are_the_local_maxima_above_the_floor_with_doppler_wrapping_round():

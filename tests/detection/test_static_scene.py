@@ -22,6 +22,7 @@ import pytest
 
 from tests.detection.chain_helpers import (
     T0_NS,
+    LidarReader,
     parked_poses,
     radar_calibration,
     radar_params,
@@ -39,6 +40,7 @@ from zendar_dataset.detection.static_scene import (
 )
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M
+from zendar_dataset.sar.shadow import RadarShadow
 
 PIXEL_M = 0.1
 WALL_AMPLITUDE = 100.0
@@ -164,6 +166,29 @@ def test_the_brightest_sensor_wins_and_frames_too_far_in_time_are_not_read():
     assert np.isnan(sar_db_at(sar, points, T0_NS + 200_000_000, rd_snr_db=zero, max_frame_gap_ns=150_000_000)[0])
 
 
+def test_a_point_in_the_radars_shadow_behind_a_lidar_obstacle_reads_nan_unless_the_shadow_is_off(scene):
+    """The facade of the fixture's image, also seen by a lidar on the ego: a point behind it (a
+    multipath ghost's place) reads NaN, hence not dynamic, with the shadow on; the same point without
+    the shadow, and a point on the road before it, keep their values."""
+    poses, sar = scene
+    lidar_ego = np.array([0.0, 0.0, 1.9])
+    wall_x = np.arange(10.0, 30.0, 0.05)
+    facade = np.column_stack([wall_x, np.full(wall_x.size, WALL_Y_M), np.full(wall_x.size, 1.0)]) - lidar_ego
+    shadowed = sar_frames(**sar._reader.frames)  # the same images, on a scene with a lidar
+    shadowed.__dict__["shadow"] = RadarShadow(LidarReader(facade, lidar_ego))
+    radar_ecef = _ecef(poses, [(0.0, 0.0)])[0]
+    points = _ecef(poses, [(20.0, WALL_Y_M + 4.0), (20.0, -3.0)])  # behind the facade (9.7 m along the ray), on the road
+    snr_db = np.array([10.0, 10.0])
+    margin_m = SarTestParams().shadow_margin_m
+    with_shadow = sar_db_at(shadowed, points, T0_NS, rd_snr_db=snr_db, radar_ecef=radar_ecef, shadow_margin_m=margin_m)
+    without = sar_db_at(shadowed, points, T0_NS, rd_snr_db=snr_db, radar_ecef=radar_ecef, shadow_margin_m=None)
+    assert np.isnan(with_shadow[0]) and np.isfinite(without).all() and with_shadow[1] == without[1]
+    assert is_dynamic(without, SarTestParams())[0] and not is_dynamic(with_shadow, SarTestParams())[0]
+    # No radar position, or a scene without lidar: nothing is in a shadow.
+    np.testing.assert_array_equal(sar_db_at(shadowed, points, T0_NS, rd_snr_db=snr_db, shadow_margin_m=margin_m), without)
+    np.testing.assert_array_equal(sar_db_at(sar, points, T0_NS, rd_snr_db=snr_db, radar_ecef=radar_ecef, shadow_margin_m=margin_m), without)
+
+
 def test_the_threshold_is_strict_and_nan_is_never_dynamic():
     params = SarTestParams(threshold_db=10.0)
     assert is_dynamic(np.array([9.99, 10.0, 10.01, np.nan, -np.inf]), params).tolist() == [True, False, False, False, True]
@@ -222,6 +247,9 @@ def test_bad_settings_and_points_raise_named_errors(scene):
         SarTestParams(threshold_db=float("nan"))
     with pytest.raises(ZendarError, match="max_frame_gap_ns"):
         SarTestParams(max_frame_gap_ns=-1)
+    for margin in (-1.0, float("inf"), True, "5"):
+        with pytest.raises(ZendarError, match="shadow_margin_m"):
+            SarTestParams(shadow_margin_m=margin)
     with pytest.raises(ZendarError, match=r"points_ecef must be \[N, 3\]"):
         sar_db_at(sar, np.zeros((4, 2)), T0_NS, rd_snr_db=np.zeros(4))
     with pytest.raises(ZendarError, match=r"rd_snr_db must be \[N\] with N = 4"):

@@ -91,6 +91,9 @@ def test_scene_round_trip_is_bit_identical(tmp_path, suffix):
     assert cube[1].tobytes() == e["cubes"][1].tobytes()
     for k, sweep in enumerate(e["sweeps"]):
         assert scene.lidar_points("top", k).tobytes() == sweep.tobytes()
+    every_point, offsets = scene.lidar_sweeps("top")  # all sweeps in one read
+    assert offsets.tolist() == np.cumsum([0, *(len(sweep) for sweep in e["sweeps"])]).tolist()
+    assert [every_point[a:b].tobytes() for a, b in zip(offsets[:-1], offsets[1:])] == [s.tobytes() for s in e["sweeps"]]
     labels = scene.labels()
     for name, value in e["labels"].items():
         np.testing.assert_array_equal(labels[name], value)

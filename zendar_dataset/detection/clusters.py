@@ -113,7 +113,8 @@ def frame_detections(points: FramePoints, params: ChainParams | None = None,
     points : FramePoints
         Every radar's points of the frame.
     params : ChainParams, optional
-        ``cluster_eps_m`` and ``centre_offset_m``.
+        ``cluster_eps_m``, ``centre_offset_m`` and ``ahead_only`` (then a detection whose corrected
+        centre is not ahead of the front bumper, x <= 0, is dropped).
     labels : numpy.ndarray, optional
         The points' cluster labels when already known (:func:`frame_clusters`).
 
@@ -126,5 +127,6 @@ def frame_detections(points: FramePoints, params: ChainParams | None = None,
     detections = []
     for cluster in frame_clusters(points, params, labels):
         x, y = cluster.corrected_centre(params.centre_offset_m)
-        detections.append({"x": float(x), "y": float(y), "score": cluster.score})
+        if x > 0.0 or not params.ahead_only:
+            detections.append({"x": float(x), "y": float(y), "score": cluster.score})
     return detections

@@ -44,6 +44,11 @@ class ChainParams:
     cluster_score : str
         One of :data:`CLUSTER_SCORES`: a cluster scores the sum (CFAR) or the maximum (CNN peaks)
         of its dynamic members' scores, times its dynamic share.
+    ahead_only : bool
+        Keep only detections whose centre is ahead of the ego's front bumper (ego x > 0), the region
+        the labels cover: a car is labelled only when its centre is there (docs/simulator.md,
+        "Labels"), so a detection of a car beside or behind the ego has no label to match and is a
+        false positive to the evaluator. False keeps every detection (a user's own, wider labels).
     """
 
     cfar_pfa: float = CFAR_PFA
@@ -51,6 +56,7 @@ class ChainParams:
     cluster_eps_m: float = CLUSTER_EPS_M
     centre_offset_m: float = DEFAULT_CENTRE_OFFSET_M
     cluster_score: str = "sum"
+    ahead_only: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 < self.cfar_pfa < 1.0:

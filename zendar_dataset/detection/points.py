@@ -159,10 +159,12 @@ def cube_points(
     points_ego, residual_mps = locate_cells(cube, cells.range_bin, cells.doppler_bin, timestamp_ns, calibration, poses)
     ecef_T_ego = poses.ecef_T_ego(int(timestamp_ns))
     rd_snr_db = cell_snr_db(cube, cells, params) if params.sar.subtract_rd_snr else np.zeros(cells.score.shape)
+    radar_ego = np.asarray(ego_T_sensor(calibration).translation, np.float64)
     sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, rd_snr_db=rd_snr_db,
-                       max_frame_gap_ns=params.sar.max_frame_gap_ns)
+                       max_frame_gap_ns=params.sar.max_frame_gap_ns, radar_ecef=ecef_T_ego.transform_points(radar_ego[None])[0],
+                       shadow_margin_m=params.sar.shadow_margin_m)
     return CubePoints(
-        int(timestamp_ns), ecef_T_ego, np.asarray(ego_T_sensor(calibration).translation, np.float64), cells.range_bin, cells.doppler_bin,
+        int(timestamp_ns), ecef_T_ego, radar_ego, cells.range_bin, cells.doppler_bin,
         points_ego, cells.score, residual_mps, sar_db, is_dynamic(sar_db, params.sar),
     )
 

@@ -36,7 +36,10 @@ scene. The threshold is measured on the training split with
 ``zendar-bench fit-chain ROOT --split train`` (``zendar_baselines.classical.chain_fit``).
 
 Points that no SAR image covers (beyond the images' 60 m, outside the radars' field of view, or with
-no SAR frame near their time), and points without a finite SNR, read NaN: the test cannot confirm
+no SAR frame near their time), points in the radar's shadow (more than ``shadow_margin_m`` behind the
+nearest obstacle the scene's lidar shows in their direction from the radar: there the image is dark
+because the radar does not see the place, and what it reports there are multipath ghosts of moving
+cars, :mod:`zendar_dataset.sar.shadow`), and points without a finite SNR, read NaN: the test cannot confirm
 them static, nor call them dynamic. :func:`is_dynamic` returns False for them, so no detection or
 moving label rests on a point without SAR evidence; the automatic labels count such points as not
 dynamic when they judge a cluster, so a cluster mixing them with dynamic points is uncertain.
@@ -51,6 +54,7 @@ import numpy as np
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M, SarFrames
+from zendar_dataset.sar.shadow import OBSTACLE_HEIGHTS_M, SHADOW_BIN_RAD
 
 # Fitted on the training split (3 scenes, 180 frames, 8661 CFAR points, 739 on labelled cars) of the
 # demo dataset `zendar-data synth ROOT --profile demo --scenes 5` by `zendar-bench fit-chain ROOT --split train`:
@@ -59,6 +63,13 @@ from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M, SarFrames
 # median 31 dB (their SAR peak holds their range-Doppler energy plus the aperture's integration
 # gain), points on moving cars -4 dB.
 DEFAULT_THRESHOLD_DB = 8.0
+# A point on a car can lie up to the car's length (4.5 m) beyond the lidar's nearest return on it (the
+# far end of a side the radar sees at a grazing angle) and half a metre more by its DOA error. Measured
+# on the default bench's training split (36 demo-short scenes), automatic labels at the CFAR row's
+# fitted threshold (21 dB), margins 0.5 / 1 / 2 / 3 / 5 m: far object precision 42.7 / 42.9 / 43.0 /
+# 42.7 / 41.9 % at recall 67.5 / 70.2 / 72.8 / 73.8 / 75.1 %; without the shadow 27.3 % at 86.1 %
+# (docs/baselines.md). A ghost lies as far behind the wall as its car is in front of it.
+DEFAULT_SHADOW_MARGIN_M = 5.0
 # SAR frames come at 10 Hz; a point is read in the frame nearest its time, but not one farther
 # than this (the scene, and with it the image's coverage, moves on).
 DEFAULT_MAX_FRAME_GAP_NS = 150_000_000
@@ -79,23 +90,34 @@ class SarTestParams:
         True (the test): the value is the SAR reading minus the point's range-Doppler SNR. False: the
         SAR reading alone, the test before the SNR was subtracted, blind to range (module docstring);
         kept for ``zendar-bench --ablations``, which measures what the subtraction changes.
+    shadow_margin_m : float or None
+        A point more than this beyond the nearest lidar obstacle in its direction from the radar is
+        in the radar's shadow and reads NaN (module docstring). None: no shadow, the paper's test as
+        it stands (kept for ``zendar-bench --ablations``).
     """
 
     threshold_db: float = DEFAULT_THRESHOLD_DB
     max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS
     subtract_rd_snr: bool = True
+    shadow_margin_m: float | None = DEFAULT_SHADOW_MARGIN_M
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.threshold_db):
             raise ZendarError(f"SarTestParams.threshold_db must be a finite number of dB, got {self.threshold_db!r}")
         if self.max_frame_gap_ns < 0:
             raise ZendarError(f"SarTestParams.max_frame_gap_ns must be >= 0, got {self.max_frame_gap_ns!r}")
+        margin = self.shadow_margin_m
+        if margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, float)) or not margin >= 0
+                                   or not np.isfinite(margin)):
+            raise ZendarError(f"SarTestParams.shadow_margin_m must be None or a finite number of metres >= 0, got {margin!r}")
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-ready dict, with the search radius the values were read with."""
+        """A JSON-ready dict, with the search radius the values were read with and how the shadow is measured."""
+        shadow = None if self.shadow_margin_m is None else {
+            "from": "lidar", "obstacle_heights_m": list(OBSTACLE_HEIGHTS_M), "bin_deg": round(float(np.rad2deg(SHADOW_BIN_RAD)), 6)}
         return {
             **asdict(self), "search_radius_m": SAR_SEARCH_RADIUS_M, "reference": "median SAR magnitude",
-            "value": "SAR reading minus range-Doppler SNR" if self.subtract_rd_snr else "SAR reading",
+            "value": "SAR reading minus range-Doppler SNR" if self.subtract_rd_snr else "SAR reading", "shadow": shadow,
         }
 
 
@@ -120,7 +142,8 @@ def nearest_frames(sar: SarFrames, timestamp_ns: int, max_gap_ns: int) -> dict[s
 
 def sar_db_at(
     sar: SarFrames, points_ecef: np.ndarray, timestamp_ns: int, *, rd_snr_db: np.ndarray,
-    max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS,
+    max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS, radar_ecef: np.ndarray | None = None,
+    shadow_margin_m: float | None = None,
 ) -> np.ndarray:
     """The static-scene test's value of points seen at ``timestamp_ns`` (module docstring).
 
@@ -138,13 +161,19 @@ def sar_db_at(
         estimate, :func:`zendar_dataset.detection.points.cell_snr_db`).
     max_frame_gap_ns : int
         See :class:`SarTestParams`.
+    radar_ecef : numpy.ndarray, optional
+        ``[3]`` float64 ECEF metres, the radar that saw the points (needed for the shadow).
+    shadow_margin_m : float, optional
+        See :class:`SarTestParams`; with ``radar_ecef``, points in that radar's shadow read NaN
+        (:meth:`zendar_dataset.sar.shadow.RadarShadow.hidden`; nothing is hidden in a scene without lidar).
 
     Returns
     -------
     numpy.ndarray
         ``[N]`` float64 dB: the brightest SAR reading over the sensors' images that cover the point
         (dB over each image's median magnitude; a static scatterer is static in every image that sees
-        it) minus ``rd_snr_db``; NaN where no image covers the point or the SNR is not finite.
+        it) minus ``rd_snr_db``; NaN where no image covers the point, the point is in the radar's
+        shadow or the SNR is not finite.
 
     Raises
     ------
@@ -162,7 +191,10 @@ def sar_db_at(
         return reading_db
     for sensor, frame in nearest_frames(sar, timestamp_ns, max_frame_gap_ns).items():
         reading_db = np.fmax(reading_db, sar.brightest_db(sensor, frame, points_ecef))
-    return np.where(np.isfinite(rd_snr_db), reading_db - rd_snr_db, np.nan)
+    judged = np.isfinite(rd_snr_db)
+    if shadow_margin_m is not None and radar_ecef is not None and sar.shadow is not None:
+        judged &= ~sar.shadow.hidden(points_ecef, radar_ecef, timestamp_ns, shadow_margin_m)
+    return np.where(judged, reading_db - rd_snr_db, np.nan)
 
 
 def is_dynamic(sar_db: np.ndarray, params: SarTestParams | None = None) -> np.ndarray:

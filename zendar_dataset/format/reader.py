@@ -578,6 +578,21 @@ class SceneReader:
     def lidar_points(self, sensor: str, frame: int) -> np.ndarray:
         """Points ``[P, 4]`` float32 (x, y, z, intensity; lidar frame, metres) of one sweep."""
         stream = f"lidar/{sensor}"
+        offsets = self._lidar_offsets(stream)
+        n = offsets.shape[0] - 1
+        if not -n <= frame < n:
+            raise IndexError(f"{self.scene_id}: {stream}: frame {frame} out of range for {n} sweeps")
+        frame %= n
+        return self.array(f"{stream}/points")[offsets[frame] : offsets[frame + 1]]
+
+    def lidar_sweeps(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
+        """Every sweep of a lidar in one read: points ``[P, 4]`` float32 (as :meth:`lidar_points`) and
+        ``[N + 1]`` int64 offsets, sweep ``k`` being ``points[offsets[k]:offsets[k + 1]]``."""
+        stream = f"lidar/{sensor}"
+        offsets = self._lidar_offsets(stream)
+        return np.asarray(self.array(f"{stream}/points")[...]), offsets
+
+    def _lidar_offsets(self, stream: str) -> np.ndarray:
         if stream not in self._offsets:
             offsets = np.asarray(self.array(f"{stream}/offsets")[...], dtype=np.int64)
             total = self.array(f"{stream}/points").shape[0]
@@ -587,12 +602,7 @@ class SceneReader:
                     f"found {offsets[0]} … {offsets[-1]}"
                 )
             self._offsets[stream] = offsets
-        offsets = self._offsets[stream]
-        n = offsets.shape[0] - 1
-        if not -n <= frame < n:
-            raise IndexError(f"{self.scene_id}: {stream}: frame {frame} out of range for {n} sweeps")
-        frame %= n
-        return self.array(f"{stream}/points")[offsets[frame] : offsets[frame + 1]]
+        return self._offsets[stream]
 
     def ego_poses(self) -> EgoPoses:
         """The scene's ego pose at any time of its tracklog (IMU calibration and ENU origin applied).

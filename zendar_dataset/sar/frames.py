@@ -9,12 +9,14 @@ magnitudes reads them alike; :meth:`SarFrames.complex_image`, which needs phase,
 
 from __future__ import annotations
 
+import functools
 from collections import OrderedDict
 
 import numpy as np
 
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.format.reader import SceneReader
+from zendar_dataset.sar.shadow import RadarShadow
 
 # The SAR value of a point is the brightest pixel within this distance of its projection
 # (a DOA error of ~1 deg moves a point 0.25-1 m at 15-60 m).
@@ -51,6 +53,9 @@ class SarFrames:
     images : dict of str to array-like
         ``[N, H, W]`` stored images per sensor (read on access): complex64, or the real magnitudes of a
         magnitude-only sensor.
+    shadow : RadarShadow or None
+        Where the radars cannot see, from the scene's lidar (:mod:`zendar_dataset.sar.shadow`; read
+        at first use); None for a scene without lidar.
     """
 
     def __init__(self, reader: SceneReader, keep_frames: int | None = CACHED_FRAMES_PER_SENSOR) -> None:
@@ -65,6 +70,10 @@ class SarFrames:
         if keep_frames is not None and not (isinstance(keep_frames, int) and keep_frames >= 1):
             raise ValueError(f"SarFrames: keep_frames must be None or a positive integer, got {keep_frames!r}")
         self._keep = None if keep_frames is None else keep_frames * max(1, len(self.sensors))
+
+    @functools.cached_property
+    def shadow(self) -> RadarShadow | None:
+        return RadarShadow.of(self._reader)
 
     def magnitude(self, sensor: str, frame: int) -> tuple[np.ndarray, float]:
         """One image's magnitude and its median non-zero magnitude.
