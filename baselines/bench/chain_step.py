@@ -64,7 +64,8 @@ def write_chain_fit(run: RunContext, split: SemiSupervisedSplit, detector: str, 
     params, summary = fit_chain(run.dataset, fit_ids, check_ids, cells_for, base, detector=detector, split=split,
                                 progress=run.progress, threshold_by=threshold_by, shard=shard, scenes=run.kept_scenes())
     fitted = {"threshold_db": params.sar.threshold_db, "cluster_eps_m": params.cluster_eps_m,
-              "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score}
+              "centre_offset_m": params.centre_offset_m, "cluster_score": params.cluster_score,
+              "ahead_only": params.ahead_only}
     if ranks.is_main():
         write_json_atomic(step_dir / CHAIN_FIT_FILE, {"format": FORMAT_NAME, "format_version": FORMAT_VERSION,
                                                       "detector": detector, "fitted": fitted,
@@ -120,6 +121,7 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
         # only in their ablations; a file from before the shadow was fitted without it).
         subtract_rd_snr = document["parameters"]["sar"].get("subtract_rd_snr", True)
         shadow_margin_m = document["parameters"]["sar"].get("shadow_margin_m")
+        ahead_only = document["fitted"].get("ahead_only", False)  # set from the labels' region since 3 December
         summary = document["summary"]
     except (KeyError, TypeError) as exc:
         raise ZendarError(f"{path}: not a {FORMAT_NAME} file of version {FORMAT_VERSION} ({exc!r} missing)") from None
@@ -127,7 +129,7 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
     params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"], subtract_rd_snr=subtract_rd_snr,
                                        shadow_margin_m=shadow_margin_m),
                      cluster_eps_m=fitted["cluster_eps_m"],
-                     centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"])
+                     centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"], ahead_only=ahead_only)
     return params, summary
 
 

@@ -139,6 +139,14 @@ class LabelledFrames:
         return np.concatenate([np.zeros(0, bool)] + [self.on_car[fid] for fid in self.points])
 
     @property
+    def labels_ahead_only(self) -> bool:
+        """Every labelled centre of the frames lies ahead of the ego's front bumper (x > 0), and there
+        is one: the labels cover that region only (the simulator's rule), so a detection elsewhere can
+        match none (:attr:`zendar_dataset.detection.ChainParams.ahead_only`)."""
+        centres = np.concatenate([np.zeros((0, 2))] + [np.asarray(labels, np.float64).reshape(-1, 2) for labels in self.labels.values()])
+        return bool(centres.shape[0] and np.all(centres[:, 0] > 0.0))
+
+    @property
     def point_ahead(self) -> np.ndarray:
         """``[P]`` bool, aligned with :attr:`sar_db`: the point lies ahead of the ego's front bumper
         (x > 0 in its frame), where the labels cover every car."""
@@ -293,8 +301,11 @@ def separation_auc(on_car: np.ndarray, sar_db: np.ndarray) -> float | None:
 
 def point_separation(frames: LabelledFrames) -> dict[str, Any]:
     """How well the SAR value separates the points on labelled cars from the others (:func:`separation_of`),
-    over the points ahead of the ego's front bumper (x > 0 in the frame): only there do the labels say
-    which points are on a car (a car beside the ego is never labelled, its points are no "others")."""
+    over the points in the labels' region: with labels only ahead of the ego's front bumper
+    (:attr:`LabelledFrames.labels_ahead_only`), only the points there (x > 0 in the frame), as a car
+    beside the ego is then never labelled and its points are no "others"."""
+    if not frames.labels_ahead_only:
+        return separation_of(frames.point_on_car, frames.sar_db, frames.point_range_m)
     ahead = frames.point_ahead
     return separation_of(frames.point_on_car[ahead], frames.sar_db[ahead], frames.point_range_m[ahead])
 
@@ -402,7 +413,9 @@ def fit_chain(
     Returns
     -------
     params : ChainParams
-        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
+        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``, and
+        ``ahead_only`` set when every label of ``frames`` lies ahead of the front bumper
+        (:attr:`LabelledFrames.labels_ahead_only`).
     summary : dict
         ``detector``, the fitted values, ``fit`` (counts, the point separation, the radius grid's
         AP, the chain's AP on the fitting frames) and ``check`` (``source``: ``"val"`` or
@@ -462,7 +475,9 @@ def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CF
     Returns
     -------
     params : ChainParams
-        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``.
+        ``base`` with the fitted ``sar.threshold_db``, ``cluster_eps_m`` and ``centre_offset_m``, and
+        ``ahead_only`` set when every label of ``frames`` lies ahead of the front bumper
+        (:attr:`LabelledFrames.labels_ahead_only`).
     fit : dict
         Counts, ``point_separation`` (:func:`separation_of`), ``threshold_by``, ``radius_grid`` (each
         radius with its offset and AP at the chosen threshold) and the chain's ``ap`` on ``frames``
@@ -478,6 +493,7 @@ def fit_on_frames(frames: LabelledFrames, base: ChainParams, detector: str = "CF
     if threshold_by not in THRESHOLD_CRITERIA:
         raise ZendarError(f"fit_on_frames: threshold_by must be one of {THRESHOLD_CRITERIA}, got {threshold_by!r}")
     counts = _counts(frames)
+    base = replace(base, ahead_only=frames.labels_ahead_only)  # the labels' region decides where detections count
     separation = point_separation(frames)
     if threshold_by == "points" and (separation["youden_j"] is None or separation["youden_j"] <= 0.0):
         raise ZendarError(

@@ -296,9 +296,10 @@ def test_the_detection_grid_computed_once_per_dynamic_set_equals_every_pair_comp
     fitted, fit = fit_on_frames(frames, base, "CNN", threshold_by="detections")
     f1_db = round(2.0 * fit["point_separation"]["f1_threshold_db"]) / 2.0
     plain = []
+    ahead = replace(base, ahead_only=True)  # every label lies ahead of the bumper (x >= 8 m): the fit keeps detections there
     for threshold_db in [f1_db] + [t for t in DETECTION_THRESHOLD_GRID_DB.tolist() if t != f1_db]:
         for eps_m in CLUSTER_EPS_GRID_M:
-            trial = replace(base, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m)
+            trial = replace(ahead, sar=replace(base.sar, threshold_db=threshold_db), cluster_eps_m=eps_m)
             offset = centre_offset_m(frames, trial)
             trial = replace(trial, centre_offset_m=0.0 if offset is None else round(offset, 2))
             plain.append((trial, chain_ap(frames, trial)))
@@ -386,16 +387,34 @@ def test_a_process_keeps_one_set_of_each_split_s_scenes_until_the_run_closes_the
     close_kept_scenes()
 
 
-def test_the_separation_counts_only_points_ahead_of_the_front_bumper():
-    """A car beside the ego is never labelled: its points, dynamic-looking, would count as "others"
-    read dynamic. Only the points ahead (x > 0) are judged."""
+def test_labels_only_ahead_of_the_bumper_make_the_fit_count_and_detect_only_there():
+    """A car beside the ego is never labelled when every label lies ahead of the front bumper: its
+    points, dynamic-looking, would count as "others" read dynamic. Then only the points ahead (x > 0)
+    are judged, and the fitted chain keeps only detections ahead; with a label beside the ego the
+    labels' region is not known to end at the bumper and every point counts."""
     points = FramePoints(
-        points_xy=np.array([(10.0, 0.0), (10.0, 5.0), (12.0, -4.0), (-1.0, 4.0), (0.0, 6.0)]), radar_xy=np.zeros((5, 2)),
-        score=np.ones(5), sar_db=np.array([-5.0, 30.0, 25.0, -6.0, -4.0]), dynamic=np.zeros(5, bool),
+        points_xy=np.array([(10.0, 0.0), (10.5, 0.0), (10.0, 5.0), (12.0, -4.0), (-1.0, 4.0), (0.0, 6.0)]),
+        radar_xy=np.zeros((6, 2)), score=np.ones(6), sar_db=np.array([-7.0, -5.0, 30.0, 25.0, -6.0, -4.0]),
+        dynamic=np.zeros(6, bool),
     )
-    on_car = np.array([True, False, False, False, False])
-    frames = LabelledFrames({"f": points}, {"f": np.array([[10.0, 0.0]])}, {"f": on_car},
-                            {"f": np.hypot(*points.points_xy.T)}, {"s": ["f"]})
-    separation = point_separation(frames)
-    assert separation["auc"] == 1.0 and separation["points_per_band"]["near"] == {"on_car": 1, "other": 2}
-    np.testing.assert_array_equal(frames.point_ahead, [True, True, True, False, False])
+    on_car = np.array([True, True, False, False, False, False])
+
+    def frames(labels):
+        fid = "s/1000000000"
+        return LabelledFrames({fid: points}, {fid: np.array(labels, float)}, {fid: on_car},
+                              {fid: np.hypot(*points.points_xy.T)}, {"s": [fid]})
+
+    ahead = frames([[10.0, 0.0]])
+    assert ahead.labels_ahead_only
+    separation = point_separation(ahead)
+    assert separation["auc"] == 1.0 and separation["points_per_band"]["near"] == {"on_car": 2, "other": 2}
+    np.testing.assert_array_equal(ahead.point_ahead, [True, True, True, True, False, False])
+    params, _ = fit_on_frames(ahead, ChainParams())
+    assert params.ahead_only
+
+    beside = frames([[10.0, 0.0], [-1.0, 4.0]])  # a labelled car beside the ego
+    assert not beside.labels_ahead_only and not frames(np.zeros((0, 2))).labels_ahead_only
+    separation = point_separation(beside)
+    assert separation["auc"] == pytest.approx(7 / 8) and separation["points_per_band"]["near"] == {"on_car": 2, "other": 4}
+    params, _ = fit_on_frames(beside, ChainParams())
+    assert not params.ahead_only

@@ -109,21 +109,22 @@ def test_one_detection_per_cluster_with_dynamic_points_pushed_along_the_line_of_
     assert frame_detections(FramePoints.concatenate([])) == []
 
 
-def test_detections_beside_or_behind_the_front_bumper_are_dropped_unless_asked_for():
-    """The labels hold only cars whose centre is ahead of the front bumper (x > 0): a car passing
-    beside the ego is never labelled, so its detection would be a false positive to the evaluator.
-    The test is on the corrected centre: a cluster just behind the bumper, pushed ahead along its line
-    of sight from a radar at the back, is kept."""
+def test_with_ahead_only_detections_beside_or_behind_the_front_bumper_are_dropped():
+    """Labels that hold only cars whose centre is ahead of the front bumper (x > 0, the simulator's)
+    never hold a car passing beside the ego, so its detection would be a false positive: with
+    ``ahead_only`` the chain drops it. The test is on the corrected centre: a cluster just behind the
+    bumper, pushed ahead along its line of sight from a radar at the back, is kept. By default (labels
+    of unknown region) every detection is kept."""
     radar = np.array([[-4.0, 0.0]])
     points = FramePoints(
         points_xy=np.array([(20.0, 0.0), (-1.0, 3.0), (-1.0, -3.0), (-0.5, 0.0)]), radar_xy=np.repeat(radar, 4, axis=0),
         score=np.ones(4), sar_db=np.zeros(4), dynamic=np.ones(4, bool),
     )
     params = ChainParams(centre_offset_m=1.0)
-    kept = frame_detections(points, params)
+    kept = frame_detections(points, dataclasses.replace(params, ahead_only=True))
     assert sorted(round(d["x"], 6) for d in kept) == [0.5, 21.0]  # (-0.5, 0) moves 1 m along +x; the two beside are dropped
-    assert len(frame_detections(points, dataclasses.replace(params, ahead_only=False))) == 4
-    assert ChainParams().to_json()["ahead_only"] is True
+    assert len(frame_detections(points, params)) == 4
+    assert ChainParams().to_json()["ahead_only"] is False
 
 
 def test_probability_peaks_are_the_local_maxima_above_the_floor_with_doppler_wrapping_round():

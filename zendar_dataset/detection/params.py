@@ -45,10 +45,11 @@ class ChainParams:
         One of :data:`CLUSTER_SCORES`: a cluster scores the sum (CFAR) or the maximum (CNN peaks)
         of its dynamic members' scores, times its dynamic share.
     ahead_only : bool
-        Keep only detections whose centre is ahead of the ego's front bumper (ego x > 0), the region
-        the labels cover: a car is labelled only when its centre is there (docs/simulator.md,
-        "Labels"), so a detection of a car beside or behind the ego has no label to match and is a
-        false positive to the evaluator. False keeps every detection (a user's own, wider labels).
+        Keep only detections whose centre is ahead of the ego's front bumper (ego x > 0). For labels
+        that hold only cars there (the simulator's: a car is labelled only when its centre is ahead of
+        the bumper, docs/simulator.md "Labels"), a detection of a car beside the ego has no label to
+        match and is a false positive to the evaluator. False (default) keeps every detection; the
+        chain fit sets it from the labels it fits on (``zendar_baselines.classical.chain_fit``).
     """
 
     cfar_pfa: float = CFAR_PFA
@@ -56,7 +57,7 @@ class ChainParams:
     cluster_eps_m: float = CLUSTER_EPS_M
     centre_offset_m: float = DEFAULT_CENTRE_OFFSET_M
     cluster_score: str = "sum"
-    ahead_only: bool = True
+    ahead_only: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 < self.cfar_pfa < 1.0:
