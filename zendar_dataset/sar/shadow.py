@@ -41,8 +41,9 @@ class RadarShadow:
     """The scene's lidar obstacles and which points lie in a radar's shadow behind them.
 
     Each lidar's sweeps are read in one go at first use and their obstacles kept, each sweep's in the
-    ego frame of its own time (a few MB for a demo scene): the test runs once per radar cube, and a
-    kept scene is tested again by every pass over it.
+    ego frame of its own time: the test runs once per radar cube, and a kept scene is tested again by
+    every pass over it. A 1 s demo-short scene holds about 100,000 lidar points (1.6 MB); a 30 s scene
+    of the paper profile at most 300 sweeps of 28,800 rays (138 MB read once, its obstacles a part).
 
     Parameters
     ----------
