@@ -111,22 +111,25 @@ def sar_frames(**frames: dict[str, np.ndarray]) -> SarFrames:
 
 class LidarReader:
     """Just what :class:`~zendar_dataset.sar.shadow.RadarShadow` reads from a scene: lidar ``top``
-    with one sweep at :data:`T0_NS`, ``points_lidar`` ``[P, 3]`` in its frame (axes along the ego's,
-    origin ``lidar_ego``), on the parked ego (:func:`parked_poses`)."""
+    mounted at ``lidar_ego`` turned by ``yaw_rad`` about the ego's z, with one sweep of
+    ``points_lidar`` ``[P, 3]`` (its own frame) at ``sweep_ns``, on the ego ``poses`` (default: parked)."""
 
-    def __init__(self, points_lidar: np.ndarray, lidar_ego) -> None:
+    def __init__(self, points_lidar: np.ndarray, lidar_ego, yaw_rad: float = 0.0, poses: EgoPoses | None = None,
+                 sweep_ns: int = T0_NS) -> None:
         self.points = np.asarray(points_lidar, np.float32)
-        self.calibration = type("Calibration", (), {"sensors": {
-            "top": {"rotation_wxyz": [1.0, 0.0, 0.0, 0.0], "translation_m": [float(v) for v in lidar_ego]}}})()
+        self.sweep_ns, self.poses = int(sweep_ns), parked_poses() if poses is None else poses
+        half = yaw_rad / 2
+        self.calibration = type("Calibration", (), {"sensors": {"top": {
+            "rotation_wxyz": [float(np.cos(half)), 0.0, 0.0, float(np.sin(half))], "translation_m": [float(v) for v in lidar_ego]}}})()
 
     def sensors(self, group: str) -> list[str]:
         return ["top"] if group == "lidar" else []
 
     def timestamps(self, stream: str) -> np.ndarray:
-        return np.array([T0_NS], np.int64)
+        return np.array([self.sweep_ns], np.int64)
 
     def lidar_sweeps(self, sensor: str) -> tuple[np.ndarray, np.ndarray]:
         return self.points, np.array([0, len(self.points)], np.int64)
 
     def ego_poses(self) -> EgoPoses:
-        return parked_poses()
+        return self.poses

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.detection.chain_helpers import T0_NS, LidarReader, parked_poses
+from tests.detection.chain_helpers import T0_NS, LidarReader, driving_poses
 from zendar_dataset.detection.static_scene import DEFAULT_SHADOW_MARGIN_M
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.geometry.occlusion import hidden_behind_obstacles
@@ -90,15 +90,25 @@ def test_bad_arguments_are_named_all_at_once():
         hidden_behind_obstacles(np.zeros((3, 3)), np.zeros(3), np.zeros(4), margin_m=-1.0, bin_rad=0.0)
 
 
-def test_the_shadow_of_a_scene_reads_its_lidar_in_the_ego_frame_and_needs_a_sweep_near_the_time(street):
-    """A parked ego whose axes are ECEF's (chain_helpers): the street placed in the ego frame, the lidar
-    sweep stored in the lidar's frame, points asked about in ECEF."""
+@pytest.mark.parametrize("speed_mps, yaw_rate_rad_s, lidar_yaw_rad, gap_ns", [
+    (0.0, 0.0, 0.0, 0),  # parked, the lidar along the ego's axes, asked at the sweep's time
+    (10.0, 1.0, np.pi / 2, 100_000_000),  # driving and turning, the lidar turned 90°, asked 100 ms after the sweep
+])
+def test_the_shadow_of_a_scene_reads_its_lidar_in_the_ego_frame_and_needs_a_sweep_near_the_time(
+        street, speed_mps, yaw_rate_rad_s, lidar_yaw_rad, gap_ns):
+    """The street in the ego frame at the sweep's time (``driving_poses`` starts with the ego's axes
+    along ECEF's), the sweep stored in the lidar's own frame (turned 90° on the second ego), the points
+    asked about in ECEF, the radar where it is when asked (1 m further and 5.7° turned on the second
+    ego). A lidar frame read as the ego's would put the facade beside the ego: no ghost hidden."""
     lidar_enu, car, seen, ghosts = street
-    poses = parked_poses()
-    shadow = RadarShadow.of(LidarReader(lidar_enu - LIDAR_ENU, LIDAR_ENU))
-    radar_ecef = poses.ego_to_ecef(RADAR_ENU[None], T0_NS)[0]
+    poses = driving_poses(speed_mps, yaw_rate_rad_s)
+    c, s = np.cos(lidar_yaw_rad), np.sin(lidar_yaw_rad)
+    in_lidar_frame = (lidar_enu - LIDAR_ENU) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # R(yaw)ᵀ · p
+    shadow = RadarShadow.of(LidarReader(in_lidar_frame, LIDAR_ENU, lidar_yaw_rad, poses))
+    asked_ns = T0_NS + gap_ns
+    radar_ecef = poses.ego_to_ecef(RADAR_ENU[None], asked_ns)[0]
     asked = np.concatenate([ghosts, car[seen]])
-    hidden = shadow.hidden(poses.ego_to_ecef(asked, T0_NS), radar_ecef, T0_NS, MARGIN_M)
+    hidden = shadow.hidden(poses.ego_to_ecef(asked, T0_NS), radar_ecef, asked_ns, MARGIN_M)
     np.testing.assert_array_equal(hidden, np.arange(len(asked)) < len(ghosts))
     far_in_time = T0_NS + MAX_SWEEP_GAP_NS + 1
     assert not shadow.hidden(poses.ego_to_ecef(ghosts, T0_NS), radar_ecef, far_in_time, MARGIN_M).any()
