@@ -213,11 +213,10 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
             # The baselines' own static-scene reading of each point (the SAR frame nearest the cube).
             with np.errstate(divide="ignore"):
                 snr_db = 10.0 * np.log10(found.snr)
-            ecef_T_cube_ego = poses.ecef_T_ego(cube_ns)
+            ecef_T_cube_ego, test = poses.ecef_T_ego(cube_ns), SarTestParams()
             sar_db = sar_db_at(sar, ecef_T_cube_ego.transform_points(found.points_ego), cube_ns, rd_snr_db=snr_db,
-                               max_frame_gap_ns=SarTestParams().max_frame_gap_ns,
-                               radar_ecef=ecef_T_cube_ego.transform_points(ego_T_sensor(calibration.sensors[radar]).translation[None])[0],
-                               shadow_margin_m=SarTestParams().shadow_margin_m)
+                               max_frame_gap_ns=test.max_frame_gap_ns, shadow_margin_m=test.shadow_margin_m,
+                               radar_ecef=ecef_T_cube_ego.transform_points(ego_T_sensor(calibration.sensors[radar]).translation[None])[0])
             tally.band.extend(_band(np.hypot(points[:, 0], points[:, 1])).tolist())
             tally.on_car.extend(on_car.tolist())
             tally.sar_db.extend(sar_db.tolist())
