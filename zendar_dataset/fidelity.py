@@ -216,6 +216,7 @@ def _scene(reader: SceneReader, truth, tally: _Tally, max_frames: int | None) ->
             ecef_T_cube_ego, test = poses.ecef_T_ego(cube_ns), SarTestParams()
             sar_db = sar_db_at(sar, ecef_T_cube_ego.transform_points(found.points_ego), cube_ns, rd_snr_db=snr_db,
                                max_frame_gap_ns=test.max_frame_gap_ns, shadow_margin_m=test.shadow_margin_m,
+                               search_radius_m=test.search_radius_m,
                                radar_ecef=ecef_T_cube_ego.transform_points(ego_T_sensor(calibration.sensors[radar]).translation[None])[0])
             tally.band.extend(_band(np.hypot(points[:, 0], points[:, 1])).tolist())
             tally.on_car.extend(on_car.tolist())

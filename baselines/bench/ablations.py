@@ -1,4 +1,4 @@
-"""``zendar-bench --ablations``: what three of the chain's changes moved, and what optional input
+"""``zendar-bench --ablations``: what four of the chain's changes moved, and what optional input
 channels add, measured as rows beside Table 1.
 
 - ``sar-reading-alone``: the CFAR row with the SAR test as it was before the range-Doppler SNR was
@@ -9,6 +9,9 @@ channels add, measured as rows beside Table 1.
   other (:attr:`zendar_dataset.detection.SarTestParams.shadow_margin_m` None; the shadow is measured
   by the lidar, :mod:`zendar_dataset.sar.shadow`): the paper's test, which calls the multipath ghosts
   behind facades dynamic. Fitted the same way. Reference: the CFAR row.
+- ``sar-window-0.5m``: the CFAR row with a point's SAR reading taken as the brightest pixel within
+  0.5 m of its projection (the window before 3 December) instead of
+  :data:`zendar_dataset.sar.frames.SAR_SEARCH_RADIUS_M`. Fitted the same way. Reference: the CFAR row.
 - ``cfar-gated-targets``: :data:`ABLATION_MODEL` supervised-only, trained on the manual-label targets
   as they were before the box projection (MOVING only at CFAR peaks inside a labelled box and their
   grown segments: ``MaskParams(manual_targets="cfar-peaks")``), its checkpoints chosen on validation
@@ -63,6 +66,8 @@ CFAR_SAR_TEST_ABLATIONS = (
      "SAR test: the SAR reading alone (no range-Doppler SNR subtracted)"),
     ("no-radar-shadow", replace(SarTestParams(), shadow_margin_m=None), "CFAR (no radar shadow)",
      "SAR test: points in the radar's shadow behind lidar obstacles judged like any other (the paper's test)"),
+    ("sar-window-0.5m", replace(SarTestParams(), search_radius_m=0.5), "CFAR (0.5 m SAR window)",
+     "SAR test: a point's SAR reading the brightest pixel within 0.5 m of it (the window before 3 December), not 0.2 m"),
 )
 #: Where the ablations' steps live in the run directory.
 ABLATIONS_DIR = "ablations"

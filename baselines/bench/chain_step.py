@@ -121,13 +121,14 @@ def read_chain_fit(step_dir: Path) -> tuple[ChainParams, dict[str, Any]]:
         # only in their ablations; a file from before the shadow was fitted without it).
         subtract_rd_snr = document["parameters"]["sar"].get("subtract_rd_snr", True)
         shadow_margin_m = document["parameters"]["sar"].get("shadow_margin_m")
+        search_radius_m = document["parameters"]["sar"].get("search_radius_m", 0.5)  # 0.5 m until 3 December
         ahead_only = document["fitted"].get("ahead_only", False)  # set from the labels' region since 3 December
         summary = document["summary"]
     except (KeyError, TypeError) as exc:
         raise ZendarError(f"{path}: not a {FORMAT_NAME} file of version {FORMAT_VERSION} ({exc!r} missing)") from None
     base = ChainParams()
     params = replace(base, sar=replace(base.sar, threshold_db=fitted["threshold_db"], subtract_rd_snr=subtract_rd_snr,
-                                       shadow_margin_m=shadow_margin_m),
+                                       shadow_margin_m=shadow_margin_m, search_radius_m=search_radius_m),
                      cluster_eps_m=fitted["cluster_eps_m"],
                      centre_offset_m=fitted["centre_offset_m"], cluster_score=fitted["cluster_score"], ahead_only=ahead_only)
     return params, summary

@@ -267,9 +267,9 @@ def _seed_record(run: Path, key: str) -> dict:
 
 def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(quick_run, tmp_path):
     """``--ablations`` on a finished run: Table 1's steps are reused, the ablation rows are made (the
-    CFAR row with the SAR reading alone and without the radar's shadow, FPN ResNet-34 supervised on
-    CFAR-gated targets and with extra input channels), and each difference on all frames is the two
-    rows' AP as the evaluator scored them."""
+    CFAR row with the SAR reading alone, without the radar's shadow and with the 0.5 m window, FPN
+    ResNet-34 supervised on CFAR-gated targets and with extra input channels), and each difference on
+    all frames is the two rows' AP as the evaluator scored them."""
     home, _ = quick_run
     copy = tmp_path / "copy"
     subprocess.run(["cp", "-a", str(home / "out"), str(copy)], check=True)
@@ -278,8 +278,9 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     assert "[rows/cfar] reused" in done.stderr and "fpn-resnet34 supervised seed 0" in done.stderr
     results = json.loads((copy / "results.json").read_text())
     assert [a["ablation"] for a in results["ablations"]] == [
-        "sar-reading-alone", "no-radar-shadow", "cfar-gated-targets", "phase-difference-channels", "static-doppler-channel"]
-    assert [a["reference"] for a in results["ablations"]] == ["cfar", "cfar", *["fpn-resnet34-supervised"] * 3]
+        "sar-reading-alone", "no-radar-shadow", "sar-window-0.5m", "cfar-gated-targets", "phase-difference-channels",
+        "static-doppler-channel"]
+    assert [a["reference"] for a in results["ablations"]] == ["cfar", "cfar", "cfar", *["fpn-resnet34-supervised"] * 3]
     for ablation in results["ablations"]:
         row_ap = json.loads((copy / ablation["row"]["metrics"]).read_text())["ap"]
         reference_ap = json.loads((copy / "rows" / ablation["reference"] / "metrics.json").read_text())["ap"]
@@ -292,6 +293,9 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
     meta = json.loads((copy / "ablations" / "no-radar-shadow" / "row" / "predictions.json").read_text())["meta"]
     assert meta["parameters"]["sar"]["shadow_margin_m"] is None
     assert meta["parameters"]["sar"]["value"] == "SAR reading minus range-Doppler SNR"
+    meta = json.loads((copy / "ablations" / "sar-window-0.5m" / "row" / "predictions.json").read_text())["meta"]
+    assert meta["parameters"]["sar"]["search_radius_m"] == 0.5
+    assert json.loads((copy / "rows" / "cfar" / "predictions.json").read_text())["meta"]["parameters"]["sar"]["search_radius_m"] == 0.2
     store = json.loads((copy / "ablations" / "cfar-gated-targets" / "label_masks" / "store" / "manifest.json").read_text())
     assert store["parameters"]["manual_targets"] == "cfar-peaks"
     # The channel rows' models read their own inputs: 4 antennas' log power and 6 phase channels, or 1

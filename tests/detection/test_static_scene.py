@@ -152,6 +152,25 @@ def test_a_point_within_the_search_radius_of_a_bright_pixel_is_static_and_one_be
     assert is_dynamic(sar_db_at(sar, beyond, T0_NS, rd_snr_db=snr_db), params)[0]
 
 
+@pytest.mark.parametrize("radius_m", [0.0, 0.2, 0.5])
+def test_the_search_radius_decides_how_far_from_a_bright_pixel_a_point_still_reads_it(scene, radius_m):
+    poses, sar = scene
+    k = round(radius_m / PIXEL_M)
+    offsets_m = np.arange(0, 8) * PIXEL_M  # 0-0.7 m off the wall, in whole pixels
+    points = _ecef(poses, [(20.0, WALL_Y_M - d) for d in offsets_m])
+    values = sar_db_at(sar, points, T0_NS, rd_snr_db=np.full(len(offsets_m), 10.0), search_radius_m=radius_m)
+    params = SarTestParams(threshold_db=10.0, search_radius_m=radius_m)
+    assert is_dynamic(values, params).tolist() == [i > k for i in range(len(offsets_m))]
+
+
+def test_search_radius_must_be_a_finite_non_negative_number_of_metres():
+    assert SarTestParams().search_radius_m == SAR_SEARCH_RADIUS_M
+    assert SarTestParams().to_json()["search_radius_m"] == SAR_SEARCH_RADIUS_M
+    for bad in (-0.1, float("nan"), float("inf"), True, "0.2"):
+        with pytest.raises(ZendarError, match="search_radius_m"):
+            SarTestParams(search_radius_m=bad)
+
+
 def test_the_brightest_sensor_wins_and_frames_too_far_in_time_are_not_read():
     poses = parked_poses()
     point = (20.0, 0.0)
@@ -223,6 +242,21 @@ def test_cube_points_subtract_each_cells_own_snr_from_its_sar_reading():
     points = cube_points(cube, cells, T0_NS, calibration, poses, sar)
     expected = 20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB - 10 * math.log10(cells.score[strongest])
     assert points.sar_db[strongest] == pytest.approx(expected, abs=0.5)
+
+
+def test_cube_points_read_the_sar_image_within_the_chains_search_radius():
+    """The bright pixel moved 0.4 m off the target: the default 0.2 m window misses it, a 0.5 m window
+    (the chain's setting) reads it."""
+    from zendar_dataset.detection import ChainParams
+
+    cube, cells, strongest, calibration, poses, _ = _point_target_on_a_bright_pixel()
+    x, y = cube_points(cube, cells, T0_NS, calibration, poses, sar_frames()).points_ego[strongest, :2]
+    sar = sar_frames(front=sar_frame(poses, (10.0, -10.0), PIXEL_M, (200, 200), [(x, y + 0.4)], WALL_AMPLITUDE))
+    near = cube_points(cube, cells, T0_NS, calibration, poses, sar)
+    wide = cube_points(cube, cells, T0_NS, calibration, poses, sar, ChainParams(sar=SarTestParams(search_radius_m=0.5)))
+    expected = 20 * math.log10(WALL_AMPLITUDE) - MEDIAN_DB - 10 * math.log10(cells.score[strongest])
+    assert wide.sar_db[strongest] == pytest.approx(expected, abs=0.5)
+    assert near.sar_db[strongest] < expected - 20.0
 
 
 def test_without_the_snr_subtraction_a_point_reads_its_sar_reading_alone():

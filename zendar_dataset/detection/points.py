@@ -162,7 +162,7 @@ def cube_points(
     radar_ego = np.asarray(ego_T_sensor(calibration).translation, np.float64)
     sar_db = sar_db_at(sar, ecef_T_ego.transform_points(points_ego), timestamp_ns, rd_snr_db=rd_snr_db,
                        max_frame_gap_ns=params.sar.max_frame_gap_ns, radar_ecef=ecef_T_ego.transform_points(radar_ego[None])[0],
-                       shadow_margin_m=params.sar.shadow_margin_m)
+                       shadow_margin_m=params.sar.shadow_margin_m, search_radius_m=params.sar.search_radius_m)
     return CubePoints(
         int(timestamp_ns), ecef_T_ego, radar_ego, cells.range_bin, cells.doppler_bin,
         points_ego, cells.score, residual_mps, sar_db, is_dynamic(sar_db, params.sar),

@@ -10,7 +10,7 @@ as a range-Doppler cell, focuses into a bright SAR pixel; a moving car's is spre
 **The value is a contrast between the two views of the same point**: the point's SAR reading minus
 its own range-Doppler SNR, both in dB,
 
-    sar_db = 20·log10(brightest pixel within SAR_SEARCH_RADIUS_M / image median) − rd_snr_db
+    sar_db = 20·log10(brightest pixel within search_radius_m / image median) − rd_snr_db
 
 where the first term is :meth:`zendar_dataset.sar.frames.SarFrames.brightest_db` (the window's
 maximum absorbs the DOA error of a point; the median is the image's floor whatever its gain) and
@@ -56,13 +56,14 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M, SarFrames
 from zendar_dataset.sar.shadow import OBSTACLE_HEIGHTS_M, SHADOW_BIN_RAD
 
-# Fitted on the training split (3 scenes, 180 frames, 8661 CFAR points, 739 on labelled cars) of the
-# demo dataset `zendar-data synth ROOT --profile demo --scenes 5` by `zendar-bench fit-chain ROOT --split train`:
-# the value whose "dynamic below it" finds the CFAR points inside labelled boxes with the largest F1
-# score (7.85 dB; ROC AUC 0.909, near / mid / far 0.939 / 0.870 / 0.893). Points off cars read a
-# median 31 dB (their SAR peak holds their range-Doppler energy plus the aperture's integration
-# gain), points on moving cars -4 dB.
-DEFAULT_THRESHOLD_DB = 8.0
+# The automatic labels' threshold (zendar-bench fits the detection chain's own per run): on the default
+# bench's training split (36 demo-short scenes, `zendar-bench autolabels ROOT --out DIR --threshold-db T`),
+# the value of a 1 dB grid whose automatic labels have the highest worst-band object F1 against the
+# manual labels (57.3 %: precision near / mid / far 60.1 / 50.9 / 46.4 % at recall 54.7 / 81.7 / 76.4 %;
+# 17 dB 56.9 %, 19 dB 55.9 %; docs/baselines.md, "The SAR reading's window"). Points off cars read a
+# median ~30 dB (their SAR peak holds their range-Doppler energy plus the aperture's integration gain),
+# points on moving cars ~0 dB.
+DEFAULT_THRESHOLD_DB = 18.0
 # A point on a car can lie up to the car's length (4.5 m) beyond the lidar's nearest return on it (the
 # far end of a side the radar sees at a grazing angle) and half a metre more by its DOA error. Measured
 # on the default bench's training split (36 demo-short scenes), automatic labels at the CFAR row's
@@ -94,12 +95,16 @@ class SarTestParams:
         A point more than this beyond the nearest lidar obstacle in its direction from the radar is
         in the radar's shadow and reads NaN (module docstring). None: no shadow, the paper's test as
         it stands (kept for ``zendar-bench --ablations``).
+    search_radius_m : float
+        A point's SAR reading is the brightest pixel within this of its projection, metres
+        (:meth:`zendar_dataset.sar.frames.SarFrames.brightest_db`).
     """
 
     threshold_db: float = DEFAULT_THRESHOLD_DB
     max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS
     subtract_rd_snr: bool = True
     shadow_margin_m: float | None = DEFAULT_SHADOW_MARGIN_M
+    search_radius_m: float = SAR_SEARCH_RADIUS_M
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.threshold_db):
@@ -110,13 +115,16 @@ class SarTestParams:
         if margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, float)) or not margin >= 0
                                    or not np.isfinite(margin)):
             raise ZendarError(f"SarTestParams.shadow_margin_m must be None or a finite number of metres >= 0, got {margin!r}")
+        radius = self.search_radius_m
+        if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not (np.isfinite(radius) and radius >= 0):
+            raise ZendarError(f"SarTestParams.search_radius_m must be a finite number of metres >= 0, got {radius!r}")
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict, with the search radius the values were read with and how the shadow is measured."""
         shadow = None if self.shadow_margin_m is None else {
             "from": "lidar", "obstacle_heights_m": list(OBSTACLE_HEIGHTS_M), "bin_deg": round(float(np.rad2deg(SHADOW_BIN_RAD)), 6)}
         return {
-            **asdict(self), "search_radius_m": SAR_SEARCH_RADIUS_M, "reference": "median SAR magnitude",
+            **asdict(self), "reference": "median SAR magnitude",
             "value": "SAR reading minus range-Doppler SNR" if self.subtract_rd_snr else "SAR reading", "shadow": shadow,
         }
 
@@ -143,7 +151,7 @@ def nearest_frames(sar: SarFrames, timestamp_ns: int, max_gap_ns: int) -> dict[s
 def sar_db_at(
     sar: SarFrames, points_ecef: np.ndarray, timestamp_ns: int, *, rd_snr_db: np.ndarray,
     max_frame_gap_ns: int = DEFAULT_MAX_FRAME_GAP_NS, radar_ecef: np.ndarray | None = None,
-    shadow_margin_m: float | None = None,
+    shadow_margin_m: float | None = None, search_radius_m: float = SAR_SEARCH_RADIUS_M,
 ) -> np.ndarray:
     """The static-scene test's value of points seen at ``timestamp_ns`` (module docstring).
 
@@ -166,6 +174,8 @@ def sar_db_at(
     shadow_margin_m : float, optional
         See :class:`SarTestParams`; with ``radar_ecef``, points in that radar's shadow read NaN
         (:meth:`zendar_dataset.sar.shadow.RadarShadow.hidden`; nothing is hidden in a scene without lidar).
+    search_radius_m : float
+        See :class:`SarTestParams`.
 
     Returns
     -------
@@ -190,7 +200,7 @@ def sar_db_at(
     if points_ecef.shape[0] == 0:
         return reading_db
     for sensor, frame in nearest_frames(sar, timestamp_ns, max_frame_gap_ns).items():
-        reading_db = np.fmax(reading_db, sar.brightest_db(sensor, frame, points_ecef))
+        reading_db = np.fmax(reading_db, sar.brightest_db(sensor, frame, points_ecef, search_radius_m))
     judged = np.isfinite(rd_snr_db)
     if shadow_margin_m is not None and radar_ecef is not None and sar.shadow is not None:
         judged &= ~sar.shadow.hidden(points_ecef, radar_ecef, timestamp_ns, shadow_margin_m)
