@@ -7,9 +7,9 @@ The measurement behind the choice of :func:`zendar_dataset.detection.static_scen
 labelled frame, on a car when inside a labelled box moved to the cube's time and grown by
 :data:`zendar_dataset.detection.boxes.ON_CAR_MARGIN_M`, banded by their range from the ego origin
 in the frame, exactly as :func:`zendar_baselines.classical.chain_fit.labelled_frames` takes them.
-Every candidate starts from the point's *reading*: the brightest SAR pixel within
-:data:`zendar_dataset.sar.frames.SAR_SEARCH_RADIUS_M`, in dB over the image's median, in the SAR
-sensor whose reading is brightest. Candidates (dB; low says "on a car"):
+Every candidate starts from the point's *reading*: the brightest SAR pixel within the chain's
+``search_radius_m`` (:attr:`zendar_dataset.detection.SarTestParams.search_radius_m`), in dB over the
+image's median, in the SAR sensor whose reading is brightest. Candidates (dB; low says "on a car"):
 
 - ``reading``: the reading alone (the absolute test);
 - ``local_{1,2,4}m``: the reading over the median of the square window of that half-width around
@@ -66,8 +66,8 @@ CANDIDATES = (
 class _ImageStatistics:
     """Per SAR frame: the peak and background magnitudes around points, and each pixel's range from the radar."""
 
-    def __init__(self, sar: SarFrames, radar_ecef) -> None:
-        self.sar, self.radar_ecef, self._rings = sar, radar_ecef, {}
+    def __init__(self, sar: SarFrames, radar_ecef, search_radius_m: float) -> None:
+        self.sar, self.radar_ecef, self.search_radius_m, self._rings = sar, radar_ecef, search_radius_m, {}
 
     def _range_rings(self, sensor: str, frame: int) -> tuple[np.ndarray, np.ndarray]:
         if (sensor, frame) not in self._rings:
@@ -103,7 +103,7 @@ class _ImageStatistics:
         def to_db(values: np.ndarray) -> np.ndarray:
             return 20.0 * np.log10(np.maximum(values, 1e-30) / floor)
 
-        rows, cols = window(0.5)
+        rows, cols = window(self.search_radius_m)
         out["peak"][inside] = to_db(magnitude[rows, cols].max(axis=1))
         for name, half_width_m in zip(self._local_names(), LOCAL_HALF_WIDTHS_M):
             rows, cols = window(half_width_m)
@@ -148,7 +148,8 @@ def _scene_candidates(reader, params: ChainParams, columns: dict[str, list[np.nd
     """Append one labelled scene's points to ``columns`` (:func:`candidate_values`)."""
     labels, poses, sar = reader.labels(), reader.ego_poses(), SarFrames(reader)
     mounts = {sensor: ego_T_sensor(reader.calibration.sensors[sensor]).translation for sensor in sar.sensors}
-    statistics = _ImageStatistics(sar, lambda sensor, t_ns: poses.ego_to_ecef(np.asarray(mounts[sensor])[None], t_ns)[0])
+    statistics = _ImageStatistics(sar, lambda sensor, t_ns: poses.ego_to_ecef(np.asarray(mounts[sensor])[None], t_ns)[0],
+                                  params.sar.search_radius_m)
     maps_of: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # a cube's power and CA noise maps
 
     def cells_of(radar, k, cube):

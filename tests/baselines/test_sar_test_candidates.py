@@ -13,7 +13,7 @@ from zendar_baselines.classical.sar_test_candidates import (
     main,
 )
 
-from zendar_dataset.detection import ChainParams
+from zendar_dataset.detection import ChainParams, SarTestParams
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.sim.generate import synthesize_dataset
 from zendar_dataset.sim.profiles import get_profile
@@ -26,10 +26,13 @@ def tiny_root(tmp_path_factory):
     return root
 
 
-def test_the_chosen_candidate_is_the_chains_value_on_the_chains_points(tiny_root):
-    values = candidate_values(tiny_root, "train")
+@pytest.mark.parametrize("search_radius_m", [None, 1.0])
+def test_the_chosen_candidate_is_the_chains_value_on_the_chains_points(tiny_root, search_radius_m):
+    """With the default SAR window and a wider one (the reading follows the chain's setting)."""
+    params = ChainParams() if search_radius_m is None else ChainParams(sar=SarTestParams(search_radius_m=search_radius_m))
+    values = candidate_values(tiny_root, "train", params)
     index = open_dataset(str(tiny_root))
-    frames = labelled_frames(index, index.scene_ids("train"), cfar_cells_for(ChainParams()), progress=False)
+    frames = labelled_frames(index, index.scene_ids("train"), cfar_cells_for(params), params, progress=False)
     np.testing.assert_array_equal(values["on_car"], frames.point_on_car)
     np.testing.assert_allclose(values["range_m"], frames.point_range_m)
     np.testing.assert_allclose(values["minus_snr"], frames.sar_db, atol=1e-4)  # float32 images
