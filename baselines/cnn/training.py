@@ -73,6 +73,13 @@ TRAINING_THREADS = 1
 #: is set (unless the environment sets it) when this module is imported, before any model runs.
 ONEDNN_MAX_CPU_ISA = "AVX2"
 os.environ.setdefault("ONEDNN_MAX_CPU_ISA", ONEDNN_MAX_CPU_ISA)
+#: The layout of the models' weights and inputs while training and predicting. In channels-last
+#: oneDNN's convolutions and ATen's batch norm need no reorders: a training step of the demo config's
+#: DenseNet-37 and FPN-ResNet-34 (width 0.125, batch 16 of 12 × 256 × 64, one thread) took 0.322 and
+#: 0.253 s against 0.413 and 0.323 s in NCHW (docs/baselines.md, "Speed"). The weights after three
+#: steps are as independent of ATen's AVX2 / AVX-512 kernels as in NCHW (the same SHA-256 with
+#: ``ATEN_CPU_CAPABILITY=avx2``; benchmarks/bench_reproducibility.py).
+MEMORY_FORMAT = torch.channels_last
 _CHECKPOINT_NAME = re.compile(r"^epoch-(\d{4,})\.pt$")
 
 
@@ -398,7 +405,7 @@ def train(
         Freshly built (its initial weights are part of the run's identity, so build it after
         ``seed_everything(seed)`` for a reproducible run); maps float32 ``[B, C, R, D]`` to logits
         ``[B, 1, R, D]`` and carries ``model.architecture``. Holds the weights of the last epoch run
-        on return (those of the chosen epoch are in ``checkpoint_path``).
+        on return (those of the chosen epoch are in ``checkpoint_path``), in :data:`MEMORY_FORMAT`.
     data : Dataset
         Samples ``(input float32 [C, R, D], mask uint8 [R, D])``, e.g. ``MaskFrames`` or a
         ``ConcatDataset`` of them.
@@ -452,7 +459,7 @@ def train(
         if process.device.type == "cuda":
             torch.backends.cudnn.benchmark = False
             torch.backends.cudnn.deterministic = True
-        model.to(process.device)
+        model.to(process.device, memory_format=MEMORY_FORMAT)
         init_record: dict[str, Any] = {}
         if init_from is not None:
             init_checkpoint = load_checkpoint(init_from, expected_architecture=model_architecture(model), model=model)
@@ -611,7 +618,7 @@ def _validation_loss(model: nn.Module, loader: DataLoader, pos_weight: float, pr
     try:
         with torch.inference_mode():
             for inputs, targets in loader:
-                logits = model(inputs.to(process.device, non_blocking=True))
+                logits = model(inputs.to(process.device, memory_format=MEMORY_FORMAT, non_blocking=True))
                 loss_sum, n_labelled = masked_bce(logits, targets.to(process.device, non_blocking=True), pos_weight)
                 totals += torch.stack([loss_sum, n_labelled]).to(torch.float64).cpu()
     finally:
@@ -639,7 +646,7 @@ def _train_epoch(
     bar.set_description(f"{description + ' ' if description else ''}epoch {epoch}/{epochs}")
     epoch_sum = torch.zeros(2, dtype=torch.float64)
     for inputs, targets in loader:
-        inputs = inputs.to(process.device, non_blocking=True)
+        inputs = inputs.to(process.device, memory_format=MEMORY_FORMAT, non_blocking=True)
         targets = targets.to(process.device, non_blocking=True)
         logits = trained(inputs)
         loss_sum, n_labelled = masked_bce(logits, targets, pos_weight)
@@ -669,7 +676,8 @@ def predict_masks(
     Parameters
     ----------
     model : nn.Module
-        Maps ``[B, C, R, D]`` to logits ``[B, 1, R, D]``; run in eval mode (restored afterwards).
+        Maps ``[B, C, R, D]`` to logits ``[B, 1, R, D]``; run in eval mode (restored afterwards),
+        moved to ``device`` and :data:`MEMORY_FORMAT` (in place, as ``Module.to`` does).
     inputs : array, float32, shape [N, C, R, D]
         Stacked windows (``stack_window``); a memory-mapped array is read one batch at a time.
     batch_size : int
@@ -692,11 +700,12 @@ def predict_masks(
     n, _, n_range, n_doppler = inputs.shape
     probabilities = np.empty((n, n_range, n_doppler), dtype=np.float32)
     was_training = model.training
-    model.to(device).eval()
+    model.to(device, memory_format=MEMORY_FORMAT).eval()
     try:
         with deterministic_torch(), torch.inference_mode():
             for start in range(0, n, batch_size):
-                batch = torch.as_tensor(np.asarray(inputs[start : start + batch_size], dtype=np.float32)).to(device)
+                batch = torch.as_tensor(np.asarray(inputs[start : start + batch_size], dtype=np.float32))
+                batch = batch.to(device, memory_format=MEMORY_FORMAT)
                 logits = model(batch)
                 if logits.shape != (len(batch), 1, n_range, n_doppler):
                     raise ZendarError(
@@ -711,6 +720,7 @@ def predict_masks(
 
 __all__ = [
     "MAX_POS_WEIGHT",
+    "MEMORY_FORMAT",
     "ONEDNN_MAX_CPU_ISA",
     "TRAINING_THREADS",
     "TrainResult",

@@ -256,6 +256,25 @@ def test_densenet_37_trains_and_comes_back_from_its_checkpoint(tmp_path, task_da
         load_checkpoint(result.checkpoint_path, expected_architecture={**rebuilt.architecture, "name": "densenet-67"})
 
 
+def test_training_and_prediction_run_channels_last_and_agree_with_an_nchw_forward(tmp_path, task_data):
+    """The layout is a speed choice: a fresh NCHW model loaded from the checkpoint predicts what
+    ``predict_masks`` does, to float32 rounding."""
+    from zendar_baselines.cnn.models import build_model
+
+    seed_everything(0)
+    model = build_model("densenet-37", in_channels=2, width_scale=0.25)
+    result = train(model, task_data, Schedule(lr=1e-3, batch_size=16, epochs=1), seed=0, out_dir=tmp_path, progress=False)
+    convolutions = [p for p in model.parameters() if p.dim() == 4]
+    assert convolutions and all(p.is_contiguous(memory_format=torch.channels_last) for p in convolutions)
+    nchw = build_model("densenet-37", in_channels=2, width_scale=0.25)
+    load_checkpoint(result.checkpoint_path, expected_architecture=nchw.architecture, model=nchw)
+    assert all(p.is_contiguous() for p in nchw.parameters())
+    inputs, _ = moving_target_task(4, seed=9)
+    with torch.no_grad():
+        logits = nchw.eval()(torch.from_numpy(inputs))[:, 0]
+    np.testing.assert_allclose(predict_masks(nchw, inputs, 4), torch.sigmoid(logits).numpy(), rtol=1e-4, atol=1e-6)
+
+
 # --- validation: the epoch chosen, early stopping, what stays on disk ---------------------------
 
 
