@@ -1,5 +1,5 @@
 """Re-fit the chain of every CNN row and seed of a finished ``zendar-bench`` run with the current code, and
-score the test split again; then the paired claims on the re-scored first seeds.
+score the test split again; then the paired claims on the re-scored seeds.
 
     python benchmarks/refit_cnn_rows.py RUN_OUT DATASET WORK [--config demo]
 
@@ -24,7 +24,7 @@ from zendar_baselines.bench import chain_step, scoring, steps
 from zendar_baselines.bench.claims import (
     claim_verdicts,
     markdown_claims,
-    matched_first_seeds,
+    matched_seeds,
 )
 from zendar_baselines.bench.configs import get_config
 from zendar_baselines.bench.context import RunContext
@@ -71,7 +71,8 @@ def main() -> None:
                     cells = [f"{100 * statistics.mean(r[b] for r in runs):.1f} ± {100 * statistics.stdev(r[b] for r in runs):.1f}"
                              if len(runs) > 1 else f"{100 * runs[0][b]:.1f}" for b in BANDS]
                     print(f"  {key} {name}: " + " / ".join(cells) + " (near / mid / far / all)")
-    print(markdown_claims(claim_verdicts(rows, matched_first_seeds(args.work, rows, args.dataset))))
+    seeds = len(list((args.run_out / "rows" / rows[1].key).glob("seed-*")))
+    print(markdown_claims(claim_verdicts(rows, matched_seeds(args.work, rows, args.dataset, seeds))))
 
 
 if __name__ == "__main__":

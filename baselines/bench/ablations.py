@@ -25,8 +25,8 @@ channels add, measured as rows beside Table 1.
   only the input changes. Reference: that architecture's supervised-only row.
 
 Each ablation row is scored on the test split as Table 1's rows are and compared with its reference
-by the claims' paired bootstrap (first seeds, the same resamples of the test split's time blocks,
-:func:`zendar_baselines.bench.claims.shared_resamples`): the difference ablation − reference per
+by the claims' paired bootstrap (every seed, the same resamples of the test split's time blocks and
+the same seed draws, :func:`zendar_baselines.bench.claims.shared_resamples`): the difference ablation − reference per
 band with its 95 % interval; "higher" / "lower" when the interval excludes 0, else "no difference
 shown". Outputs: ``ablations.md`` and ``results.json``'s ``ablations``.
 """
@@ -186,13 +186,17 @@ def _cfar_ablation(run: RunDirectory, context: RunContext, labels: TrainingLabel
                                              [read_metrics(row_dir / "metrics.json")]), f"{ABLATIONS_DIR}/{name}/row")
 
 
-def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation]) -> list[dict[str, Any]]:
+def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation], seeds: int) -> list[dict[str, Any]]:
     """``results.json``'s ``ablations``: each row's AP (mean over seeds) and its paired differences
-    from its reference row per band (first seeds, the claims' shared resamples)."""
-    from zendar_baselines.bench.claims import matched_predictions, shared_resamples
+    from its reference row per band (every seed, the claims' shared resamples and seed draws)."""
+    from zendar_baselines.bench.claims import matched_predictions, seed_predictions, shared_resamples
 
-    paths = {ablation.row.key: run_path / ablation.folder / "predictions.json" for ablation in ablations}
-    paths.update({ablation.reference: run_path / "rows" / ablation.reference / "predictions.json" for ablation in ablations})
+    def row_dir(ablation: Ablation) -> Path:
+        folder = run_path / ablation.folder  # a CNN row's first seed, or the CFAR row itself
+        return folder.parent if folder.name.startswith("seed-") else folder
+
+    paths = {ablation.row.key: seed_predictions(row_dir(ablation), seeds) for ablation in ablations}
+    paths.update({ablation.reference: seed_predictions(run_path / "rows" / ablation.reference, seeds) for ablation in ablations})
     keys = list(paths)
     aps, resampling = shared_resamples(keys, matched_predictions(paths, root))
     out = []
@@ -212,9 +216,9 @@ def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation]) -> 
 
 def markdown_ablations(records: list[dict[str, Any]], reference_aps: dict[str, dict[str, float | None]]) -> str:
     """The ablations' table: AP per band of the ablation row and its reference (means over seeds), and
-    the paired difference of their first seeds [95 % interval], in AP points."""
+    the paired difference of their seed means [95 % interval], in AP points."""
     lines = ["| ablation | change | band | AP ablation (seed mean) | AP reference (seed mean) | "
-             "ablation − reference, first seeds [95 % interval] | reading |",
+             "ablation − reference [95 % interval] | reading |",
              "|---|---|---|--:|--:|--:|---|"]
     for record in records:
         for band in (*RANGE_BANDS, "all"):

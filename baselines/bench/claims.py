@@ -5,20 +5,26 @@
 - ``ap_falls_with_range``: per row, near above mid and mid above far (two bands of one row, over the
   same resamples).
 
-Every comparison uses the first seed of each row (the seed whose ``metrics.json`` the row folder
-holds), matched by the official evaluator (:func:`zendar_dataset.eval.evaluate.matched_detections`),
-and the same resamples of the test split's units: each scene's frames cut into time blocks of
-:data:`BLOCK_S` (see docs/baselines.md for why that length). A comparison holds when its whole 95 %
+Every comparison uses every seed of each row, matched by the official evaluator
+(:func:`zendar_dataset.eval.evaluate.matched_detections`), and the same resamples of the test split's
+units: each scene's frames cut into time blocks of :data:`BLOCK_S` (see docs/baselines.md for why that
+length). A row is the mean of its seeds' APs; in every resample its seeds are drawn with replacement
+(:func:`zendar_dataset.eval.paired.pooled_over_seeds`; the same draws for the bands of one row,
+independent draws per row), so an interval holds the spread between trainings as well as that of the
+test frames. With one seed per row this is the plain paired bootstrap. A comparison holds when its whole 95 %
 interval is above 0, fails when it is below, and is undecided when it contains 0; a claim holds when
 every comparison holds, fails when any fails, and is undecided otherwise.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import zlib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.bootstrap import distinct_resamples, resample_weights
@@ -30,7 +36,9 @@ from zendar_dataset.eval.paired import (
     PairedDifference,
     ResampledAP,
     paired_difference,
+    pooled_over_seeds,
     resampled_ap,
+    seed_draws,
     too_few_resamples,
 )
 from zendar_dataset.eval.protocol import BOOTSTRAP_CONFIDENCE, BOOTSTRAP_UNIT_BLOCK, RANGE_BANDS
@@ -138,7 +146,7 @@ def claim_comparisons(rows: list[Row], aps: Mapping[str, Mapping[str, ResampledA
     return out
 
 
-def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *, block_s: float = BLOCK_S,
+def claim_verdicts(rows: list[Row], matched: Mapping[str, Sequence[MatchedDetections]], *, block_s: float = BLOCK_S,
                    n_resamples: int = CLAIM_RESAMPLES, seed: int = CLAIM_SEED) -> dict[str, Any]:
     """``results.json``'s ``claims``: per claim its comparisons, their intervals and verdicts.
 
@@ -147,7 +155,8 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
     rows
         Table 1's rows.
     matched
-        Row key → the evaluator's matching of the row's first-seed predictions on the test split.
+        Row key → the evaluator's matching of each of the row's seeds' predictions on the test split,
+        in seed order (:func:`matched_seeds`).
     block_s, n_resamples, seed
         The shared resamples: units are each scene's time blocks of ``block_s``.
 
@@ -174,25 +183,30 @@ def claim_verdicts(rows: list[Row], matched: Mapping[str, MatchedDetections], *,
     }
 
 
-def shared_resamples(keys: list[str], matched: Mapping[str, MatchedDetections], *, block_s: float = BLOCK_S,
+def shared_resamples(keys: list[str], matched: Mapping[str, Sequence[MatchedDetections]], *, block_s: float = BLOCK_S,
                      n_resamples: int = CLAIM_RESAMPLES, seed: int = CLAIM_SEED
                      ) -> tuple[dict[str, dict[str, ResampledAP]], dict[str, Any]]:
-    """Each row's AP per band on all frames and in the same resamples of the test split's time blocks.
+    """Each row's AP per band (the mean over its seeds) on all frames and in the same resamples of
+    the test split's time blocks, its seeds drawn with replacement in every resample (module docstring).
 
     Returns
     -------
     aps, resampling
-        Key → band → :class:`ResampledAP`; and the resampling's record (``problem`` when the split
-        has too few blocks: then no resample is drawn and every interval is None).
+        Key → band → :class:`ResampledAP`; and the resampling's record (``seeds``: how many seeds
+        each row pooled; ``problem`` when the split has too few blocks: then no resample is drawn and
+        every interval is None).
 
     Raises
     ------
     ZendarError
-        When the rows were not scored on the same frames.
+        When a row has no seed, or the rows' seeds were not scored on the same frames.
     """
-    first = matched[keys[0]]
     for key in keys:
-        if matched[key].frame_ids != first.frame_ids:
+        if not matched[key]:
+            raise ZendarError(f"row {key}: no seed's predictions to compare")
+    first = matched[keys[0]][0]
+    for key in keys:
+        if any(seed_matched.frame_ids != first.frame_ids for seed_matched in matched[key]):
             raise ZendarError(f"row {key}: scored on other frames than row {keys[0]}; paired "
                               "comparisons need the same frames")
     frame_unit, n_units = frame_units(first.frame_ids, first.evaluated_frame, block_s)
@@ -201,29 +215,42 @@ def shared_resamples(keys: list[str], matched: Mapping[str, MatchedDetections], 
     weights = resample_weights(n_units, 0 if problem else n_resamples, seed)
     aps = {}
     for key in keys:
-        bands = matched[key].band_detections(frame_unit)
-        aps[key] = {band: resampled_ap(bands[band], weights) for band in RANGE_BANDS}
+        per_seed = [seed_matched.band_detections(frame_unit) for seed_matched in matched[key]]
+        # A row's draws depend on the row's key and the seed alone, not on which other rows are compared.
+        draws = seed_draws(weights.shape[0], len(per_seed), np.random.default_rng([seed, zlib.crc32(key.encode())]))
+        aps[key] = {band: pooled_over_seeds([resampled_ap(bands[band], weights) for bands in per_seed], draws)
+                    for band in RANGE_BANDS}
     resampling = {
         "unit": BOOTSTRAP_UNIT_BLOCK, "block_s": block_s, "n_units": n_units,
         "distinct_resamples": distinct_resamples(n_units), "n_resamples": n_resamples, "seed": seed,
-        "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "first",
+        "confidence": BOOTSTRAP_CONFIDENCE, "seeds_compared": "all",
+        "seeds": {key: len(matched[key]) for key in keys},
     }
     if problem:
         resampling["problem"] = problem
     return aps, resampling
 
 
-def matched_first_seeds(run_path: Path, rows: list[Row], root: Path) -> dict[str, MatchedDetections]:
-    """Row key → the evaluator's matching of ``rows/<key>/predictions.json`` (the first seed) on the test split."""
-    return matched_predictions({row.key: run_path / "rows" / row.key / "predictions.json" for row in rows}, root)
+def seed_predictions(row_dir: Path, seeds: int) -> list[Path]:
+    """A row's predictions files, in seed order: ``seed-<k>/predictions.json`` for ``k < seeds`` when
+    the row has seed folders (a CNN row), else its one ``predictions.json`` (CFAR)."""
+    if (row_dir / "seed-0").is_dir():
+        return [row_dir / f"seed-{k}" / "predictions.json" for k in range(seeds)]
+    return [row_dir / "predictions.json"]
 
 
-def matched_predictions(paths: Mapping[str, Path], root: Path) -> dict[str, MatchedDetections]:
-    """Key → the evaluator's matching of the predictions file ``paths[key]`` on the test split of ``root``."""
+def matched_seeds(run_path: Path, rows: list[Row], root: Path, seeds: int) -> dict[str, list[MatchedDetections]]:
+    """Row key → the evaluator's matching of each of the row's ``seeds`` seeds' predictions on the test
+    split (:func:`seed_predictions` of ``rows/<key>``)."""
+    return matched_predictions({row.key: seed_predictions(run_path / "rows" / row.key, seeds) for row in rows}, root)
+
+
+def matched_predictions(paths: Mapping[str, Sequence[Path]], root: Path) -> dict[str, list[MatchedDetections]]:
+    """Key → the evaluator's matching of each predictions file of ``paths[key]`` on the test split of ``root``."""
     from zendar_dataset.format.ground_truth import ground_truth_frames
 
     ground_truth = {"frames": ground_truth_frames(root, "test"), "split": "test"}
-    return {key: matched_detections(path, ground_truth, split="test") for key, path in paths.items()}
+    return {key: [matched_detections(path, ground_truth, split="test") for path in files] for key, files in paths.items()}
 
 
 def markdown_claims(verdicts: Mapping[str, Any]) -> str:
@@ -242,7 +269,8 @@ def markdown_claims(verdicts: Mapping[str, Any]) -> str:
     if resampling is not None and "problem" in resampling:
         return "\n".join(lines) + "\n\n" + "\n".join(summary) + f"\n\n**No intervals**: {resampling['problem']}.\n"
     note = "" if resampling is None else (
-        f"\nPaired bootstrap of first seeds: {resampling['n_resamples']} shared resamples of "
+        f"\nPaired bootstrap over every seed (a row is the mean of its seeds' AP; its seeds drawn with replacement "
+        f"in every resample): {resampling['n_resamples']} shared resamples of "
         f"{resampling['n_units']} units ({resampling['block_s']:g} s time blocks of the test scenes; "
         f"{resampling['distinct_resamples']:,} distinct resamples possible); holds: interval above 0, "
         "fails: below 0, undecided: contains 0.\n")

@@ -346,12 +346,12 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
                    elapsed_s: float, split: SemiSupervisedSplit, ablations: list[Ablation] | None) -> dict[str, Any]:
     from zendar_baselines.bench.car_counts import markdown_car_counts, split_car_counts
     from zendar_baselines.bench.chain_step import CFAR_STEP, chain_fit_record
-    from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_first_seeds
+    from zendar_baselines.bench.claims import claim_verdicts, markdown_claims, matched_seeds
     from zendar_baselines.bench.figures import write_bev_figure, write_loss_curves, write_pr_comparisons
 
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
-    verdicts = claim_verdicts(rows, matched_first_seeds(out, rows, context.root))
+    verdicts = claim_verdicts(rows, matched_seeds(out, rows, context.root, seeds))
     problem = next(iter(verdicts.values()))["resampling"].get("problem")
     if problem:
         say(f"[claims] {problem}")
@@ -381,7 +381,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     if ablations is not None:
         from zendar_baselines.bench.ablations import compare_ablations, markdown_ablations
 
-        results["ablations"] = compare_ablations(out, context.root, ablations)
+        results["ablations"] = compare_ablations(out, context.root, ablations, seeds)
         ablation_table = markdown_ablations(results["ablations"], {row.key: row.ap_mean() for row in rows})
         write_text_atomic(out / "ablations.md", "### Ablations, paired intervals (AP points)\n\n" + ablation_table)
         table += "\n### Ablations, paired intervals (AP points)\n\n" + ablation_table

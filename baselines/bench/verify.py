@@ -10,7 +10,7 @@ apart (the CFAR row identical), because oneDNN's convolutions and ATen's vectori
 in another order on each, and training compounds the rounding over thousands of steps. On one
 machine verifying a run is exact.
 
-The claims' paired intervals are recomputed from the run's recorded first-seed predictions (the same
+The claims' paired intervals are recomputed from the run's recorded predictions of every seed (the same
 resamples, so the same numbers): each comparison's verdict must be the recorded one. A results file
 whose ``claims`` predate paired intervals (no ``comparisons``) has them skipped, and says so.
 """
@@ -96,7 +96,7 @@ def verify_run(out: Path, device: str = "cpu") -> VerifyReport:
 
 def _verify_claims(out: Path, results: dict, root: Path, lines: list[str]) -> bool:
     """Recompute the claims from the recorded predictions; True when every verdict is the recorded one."""
-    from zendar_baselines.bench.claims import claim_verdicts, matched_first_seeds
+    from zendar_baselines.bench.claims import claim_verdicts, matched_seeds
     from zendar_baselines.bench.results_table import Row
 
     recorded = results.get("claims")
@@ -105,7 +105,9 @@ def _verify_claims(out: Path, results: dict, root: Path, lines: list[str]) -> bo
         return True
     rows = [Row(r["key"], r["method"], r["unsupervised"], r["supervised"]) for r in results["rows"]]
     resampling = next(iter(recorded.values()))["resampling"]
-    again = claim_verdicts(rows, matched_first_seeds(out, rows, root), block_s=resampling["block_s"],
+    # Runs of before 3 December compared first seeds only.
+    seeds = 1 if resampling.get("seeds_compared") == "first" else int(results["seeds"])
+    again = claim_verdicts(rows, matched_seeds(out, rows, root, seeds), block_s=resampling["block_s"],
                            n_resamples=resampling["n_resamples"], seed=resampling["seed"])
     differing = [
         f"{name} {was['pair']} {was['band']}: {was['verdict']} -> {now['verdict']}"

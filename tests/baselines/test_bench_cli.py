@@ -74,7 +74,8 @@ def test_quick_bench_writes_table_one(quick_run):
     n_comparisons = {"cnn_beats_cfar": 6 * 3, "pretraining_helps": 3 * 3, "ap_falls_with_range": 7 * 2}
     for name, claim in results["claims"].items():
         assert claim["verdict"] in ("holds", "fails", "undecided")
-        assert claim["resampling"]["unit"] == "scene_time_block" and claim["resampling"]["seeds_compared"] == "first"
+        assert claim["resampling"]["unit"] == "scene_time_block" and claim["resampling"]["seeds_compared"] == "all"
+        assert claim["resampling"]["seeds"] == {row["key"]: results["seeds"] if row["supervised"] else 1 for row in results["rows"]}
         assert len(claim["comparisons"]) == n_comparisons[name]
         for comparison in claim["comparisons"]:
             low, high = comparison["ci95"]

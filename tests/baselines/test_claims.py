@@ -40,8 +40,9 @@ def _run(frames, predictions_by_row, **options):
         Row("densenet-37-supervised", "zoom-out DenseNet-37", False, True),
         Row("densenet-37-pretrained", "zoom-out DenseNet-37", True, True),
     ]
-    matched = {key: matched_detections({"results": results}, {"frames": frames})
-               for key, results in predictions_by_row.items()}
+    matched = {key: [matched_detections({"results": results}, {"frames": frames})
+                     for results in (seeds if isinstance(seeds, list) else [seeds])]
+               for key, seeds in predictions_by_row.items()}
     return claim_verdicts(rows, matched, n_resamples=300, **options)
 
 
@@ -68,7 +69,8 @@ def test_verdicts_of_claims_worked_by_hand():
     assert falls["verdict"] == "undecided"
     resampling = beats["resampling"]
     assert resampling == {"unit": "scene_time_block", "block_s": 2.0, "n_units": 6, "distinct_resamples": 462,
-                          "n_resamples": 300, "seed": 0, "confidence": 0.95, "seeds_compared": "first"}
+                          "n_resamples": 300, "seed": 0, "confidence": 0.95, "seeds_compared": "all",
+                          "seeds": {"cfar": 1, "densenet-37-supervised": 1, "densenet-37-pretrained": 1}}
     table = markdown_claims(verdicts)
     assert ("| cnn beats cfar | zoom-out DenseNet-37 (supervised only) − CFAR | near | +50.0 [+50.0, +50.0] | holds |"
             in table)
@@ -103,8 +105,8 @@ def test_too_few_blocks_give_no_interval_and_different_frames_are_refused():
     enough = _run(frames, rows, block_s=1.0)["cnn_beats_cfar"]["resampling"]
     assert enough["n_units"] == 6 and "problem" not in enough
     other = _frames(n_scenes=3, n_frames=40)
-    matched = {"cfar": matched_detections({"results": _found(frames)}, {"frames": frames}),
-               "x": matched_detections({"results": _found(other)}, {"frames": other})}
+    matched = {"cfar": [matched_detections({"results": _found(frames)}, {"frames": frames})],
+               "x": [matched_detections({"results": _found(other)}, {"frames": other})]}
     with pytest.raises(ZendarError, match="row x: scored on other frames than row cfar"):
         claim_verdicts([Row("cfar", "CFAR", False, False), Row("x", "FPN ResNet-34", False, True)], matched)
 
@@ -149,3 +151,46 @@ def test_distinct_cars_per_band_count_each_car_of_each_scene_once_and_tabulate()
     assert count_distinct_cars([b]).cars["all"] == 1
     table = markdown_car_counts({"test": counts.to_json()})
     assert "| test | 1 (1/0/0/0) | 1 (1/0/0/0) | 1 (0/1/0/0) | 2 (1/1/0/0) |" in table
+
+
+def test_a_row_is_the_mean_of_its_seeds_and_their_spread_widens_the_interval():
+    """DenseNet-37 supervised: seed 0 finds every car (far AP 1), seed 1 ranks a false alarm above its
+    far car (far AP 0.5); CFAR misses the far car every other frame (far AP 0.5 in every resample).
+    The row's far AP is 0.75, +0.25 over CFAR; a quarter of the resamples draw seed 1 twice (+0.0), so
+    the interval reaches 0: undecided, where the first seed alone would hold."""
+    frames = _frames()
+    cfar = _found(frames, keep=lambda k, i: i < 2 or k % 2 == 0, clutter=(0, 1))
+    good, worse_far = _found(frames), _found(frames, clutter=(2,))
+    pooled = _run(frames, {"cfar": cfar, "densenet-37-supervised": [good, worse_far], "densenet-37-pretrained": good})
+    far = next(c for c in pooled["cnn_beats_cfar"]["comparisons"]
+               if c["better"] == "densenet-37-supervised" and c["band"] == "far")
+    assert far["difference"] == 0.25 and far["ci95"] == [0.0, 0.5] and far["verdict"] == "undecided"
+    assert pooled["cnn_beats_cfar"]["resampling"]["seeds"]["densenet-37-supervised"] == 2
+    first_only = _run(frames, {"cfar": cfar, "densenet-37-supervised": good, "densenet-37-pretrained": good})
+    far = next(c for c in first_only["cnn_beats_cfar"]["comparisons"]
+               if c["better"] == "densenet-37-supervised" and c["band"] == "far")
+    assert far["verdict"] == "holds"
+
+
+def test_seed_draws_of_a_row_do_not_depend_on_the_other_rows_compared():
+    from zendar_baselines.bench.claims import shared_resamples
+
+    frames = _frames()
+    seeds = [matched_detections({"results": _found(frames, clutter=clutter)}, {"frames": frames}) for clutter in ((), (2,), (1,))]
+    cfar = [matched_detections({"results": _found(frames)}, {"frames": frames})]
+    alone, _ = shared_resamples(["row"], {"row": seeds}, n_resamples=200)
+    together, _ = shared_resamples(["cfar", "row"], {"cfar": cfar, "row": seeds}, n_resamples=200)
+    for band in ("near", "mid", "far"):
+        np.testing.assert_array_equal(alone["row"][band].resamples, together["row"][band].resamples)
+
+
+def test_pooled_over_seeds_by_hand():
+    from zendar_dataset.eval.paired import ResampledAP, pooled_over_seeds
+
+    per_seed = [ResampledAP(0.2, np.array([0.1, 0.3, np.nan])), ResampledAP(0.6, np.array([0.5, 0.7, np.nan]))]
+    pooled = pooled_over_seeds(per_seed, np.array([[0, 0], [0, 1], [1, 1]]))
+    assert pooled.point == pytest.approx(0.4)
+    np.testing.assert_allclose(pooled.resamples, [0.1, 0.5, np.nan])
+    assert pooled_over_seeds(per_seed[:1], np.zeros((3, 1), np.int64)) is per_seed[0]
+    with pytest.raises(ValueError, match="seed draws"):
+        pooled_over_seeds(per_seed, np.zeros((3, 3), np.int64))

@@ -5,7 +5,8 @@ units (:func:`~zendar_dataset.eval.bootstrap.resample_weights` with one seed): w
 resample easy or hard (which cars, which ranges, which stretches of road) is shared by both, so the
 interval of the difference is narrower than two separate intervals would suggest, and says what
 the data can decide. The same holds for two bands of one detector (near against mid), resampled
-together.
+together. A detector trained with several seeds enters as the mean of its seeds' APs, its seeds
+drawn with replacement in every resample (:func:`pooled_over_seeds`).
 
 A difference is taken in the claimed direction (the detector or band claimed better minus the
 other); its verdict is ``"holds"`` when the whole interval is above 0, ``"fails"`` when it is below 0,
@@ -14,6 +15,7 @@ and ``"undecided"`` when it contains 0 (or no resample had ground truth in both)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +78,37 @@ def resampled_ap(band: BandDetections, weights: np.ndarray) -> ResampledAP:
     n_units = weights.shape[1]
     point = resampled_average_precision(band, np.ones((1, n_units), dtype=np.int64))[0]
     return ResampledAP(float(point), resampled_average_precision(band, weights))
+
+
+def seed_draws(n_resamples: int, n_seeds: int, rng: np.random.Generator) -> np.ndarray:
+    """int64 ``[n_resamples, n_seeds]``: for each resample, ``n_seeds`` seed indices drawn with
+    replacement (:func:`pooled_over_seeds`)."""
+    return rng.integers(0, n_seeds, size=(n_resamples, n_seeds), dtype=np.int64)
+
+
+def pooled_over_seeds(per_seed: Sequence[ResampledAP], draws: np.ndarray) -> ResampledAP:
+    """One detector trained with several seeds, as the mean of its seeds' APs.
+
+    On all frames, the mean of the seeds' APs. In resample ``r``, the mean over the seeds drawn for
+    it (``draws[r]``, with replacement) of their APs in that resample: the interval then holds the
+    spread between trainings as well as that of the frames, and a comparison does not hang on one
+    training's luck. With one seed, that seed's APs unchanged.
+
+    Parameters
+    ----------
+    per_seed
+        Each seed's :class:`ResampledAP`, over the same resamples.
+    draws
+        int64 ``[R, S]`` seed indices (:func:`seed_draws`), ``S = len(per_seed)``; use the same
+        draws for two bands of one detector, independent draws for different detectors.
+    """
+    if len(per_seed) == 1:
+        return per_seed[0]
+    resamples = np.stack([ap.resamples for ap in per_seed], axis=1)  # [R, S]
+    if draws.shape != resamples.shape:
+        raise ValueError(f"seed draws of shape {draws.shape} for {resamples.shape[1]} seeds and {resamples.shape[0]} resamples")
+    drawn = np.take_along_axis(resamples, draws, axis=1)
+    return ResampledAP(float(np.mean([ap.point for ap in per_seed])), drawn.mean(axis=1))
 
 
 def verdict(low: float | None, high: float | None) -> str:
