@@ -45,6 +45,7 @@ def main() -> None:
     args = parser.parse_args()
     context = RunContext.open(args.dataset, get_config(args.config), args.work, "cpu")
     split = read_split(args.run_out / "split" / "split.json", dataset_root=context.dataset)
+    seeds = json.loads((args.run_out / "results.json").read_text())["seeds"]  # this run's, not leftover folders
     rows = [Row("cfar", METHOD_NAMES["cfar"], False, False)]
     (args.work / "rows" / "cfar").mkdir(parents=True, exist_ok=True)
     shutil.copy(args.run_out / "rows" / "cfar" / "predictions.json", args.work / "rows" / "cfar" / "predictions.json")
@@ -54,7 +55,7 @@ def main() -> None:
                 key = f"{model}-{'pretrained' if pretrained else 'supervised'}"
                 rows.append(Row(key, METHOD_NAMES[model], pretrained, True))
                 refitted, recorded = [], []
-                for seed_dir in sorted((args.run_out / "rows" / key).glob("seed-*")):
+                for seed_dir in (args.run_out / "rows" / key / f"seed-{k}" for k in range(seeds)):
                     out = args.work / "rows" / key / seed_dir.name
                     out.mkdir(parents=True, exist_ok=True)
                     checkpoint = steps.final_checkpoint(seed_dir)
@@ -71,7 +72,6 @@ def main() -> None:
                     cells = [f"{100 * statistics.mean(r[b] for r in runs):.1f} ± {100 * statistics.stdev(r[b] for r in runs):.1f}"
                              if len(runs) > 1 else f"{100 * runs[0][b]:.1f}" for b in BANDS]
                     print(f"  {key} {name}: " + " / ".join(cells) + " (near / mid / far / all)")
-    seeds = len(list((args.run_out / "rows" / rows[1].key).glob("seed-*")))
     print(markdown_claims(claim_verdicts(rows, matched_seeds(args.work, rows, args.dataset, seeds))))
 
 

@@ -282,12 +282,13 @@ def test_ablations_add_their_rows_with_paired_differences_and_reuse_the_table(qu
         "sar-reading-alone", "no-radar-shadow", "sar-window-0.5m", "cfar-gated-targets", "phase-difference-channels",
         "static-doppler-channel"]
     assert [a["reference"] for a in results["ablations"]] == ["cfar", "cfar", "cfar", *["fpn-resnet34-supervised"] * 3]
+    row_aps = {row["key"]: row["ap"] for row in results["rows"]}
     for ablation in results["ablations"]:
-        row_ap = json.loads((copy / ablation["row"]["metrics"]).read_text())["ap"]
-        reference_ap = json.loads((copy / "rows" / ablation["reference"] / "metrics.json").read_text())["ap"]
+        row_ap, reference_ap = ablation["row"]["ap"], row_aps[ablation["reference"]]  # seed means
         for band, comparison in ablation["minus_reference"].items():
             if row_ap[band] is not None and reference_ap[band] is not None:
-                assert comparison["difference"] == pytest.approx(row_ap[band] - reference_ap[band], abs=1e-4)
+                # Three values each rounded to 4 decimals: up to 1.5e-4 apart.
+                assert comparison["difference"] == pytest.approx(row_ap[band] - reference_ap[band], abs=1.5e-4)
             assert comparison["reading"] in ("higher", "lower", "no difference shown")
     meta = json.loads((copy / "ablations" / "sar-reading-alone" / "row" / "predictions.json").read_text())["meta"]
     assert meta["parameters"]["sar"]["value"] == "SAR reading" and meta["parameters"]["sar"]["shadow_margin_m"] > 0
@@ -432,3 +433,36 @@ def test_verify_of_a_directory_that_is_not_a_run_is_refused(tmp_path):
     (tmp_path / "out").mkdir()
     done = bench("verify", "--out", str(tmp_path / "out"), env_home=tmp_path, timeout=60)
     assert done.returncode == 2 and "not a finished zendar-bench run" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_ablation_differences_pool_every_seed_of_both_rows(quick_run, tmp_path):
+    """Two seeds per row, laid out as a run lays them out: the ablation row's seeds under
+    ``ablations/<name>/<row>/seed-<k>``, the reference's under ``rows/<row>/seed-<k>``. The ablation's
+    seeds both predict as the quick run's first seed; the reference's second seed predicts nothing (AP
+    0), so the difference of seed means is half the first seed's AP in every band. The leftover third
+    seed folders of an earlier, larger run are not read."""
+    from zendar_baselines.bench.ablations import Ablation, compare_ablations
+    from zendar_baselines.bench.results_table import Row
+
+    home, _ = quick_run
+    out = home / "out"
+    dataset = next((home / "cache" / "zendar-dataset" / "bench").iterdir())
+    seed_dir = out / "rows" / "fpn-resnet34-supervised" / "seed-0"
+    first = json.loads((seed_dir / "predictions.json").read_text())
+    first_ap = json.loads((seed_dir / "metrics.json").read_text())["ap"]
+    empty = {**first, "results": {frame: [] for frame in first["results"]}}
+    layouts = {"ablations/x/fpn-resnet34-supervised": (first, first, empty), "rows/fpn-resnet34-supervised": (first, empty, first)}
+    for folder, seeds in layouts.items():
+        for k, predictions in enumerate(seeds):
+            (run := tmp_path / "run" / folder / f"seed-{k}").mkdir(parents=True)
+            (run / "predictions.json").write_text(json.dumps(predictions))
+    row = Row("fpn-resnet34-supervised-x", "FPN ResNet-34", False, True)
+    ablation = Ablation("x", "nothing", "fpn-resnet34-supervised", row, "ablations/x/fpn-resnet34-supervised/seed-0")
+    [record] = compare_ablations(tmp_path / "run", dataset, [ablation], seeds=2)
+    assert record["resampling"]["seeds"] == {"fpn-resnet34-supervised-x": 2, "fpn-resnet34-supervised": 2}
+    assert any(first_ap[band] for band in record["minus_reference"])
+    for band, comparison in record["minus_reference"].items():
+        if first_ap[band] is None:
+            assert comparison["difference"] is None
+        else:
+            assert comparison["difference"] == pytest.approx(first_ap[band] / 2, abs=1e-4)

@@ -194,3 +194,14 @@ def test_pooled_over_seeds_by_hand():
     assert pooled_over_seeds(per_seed[:1], np.zeros((3, 1), np.int64)) is per_seed[0]
     with pytest.raises(ValueError, match="seed draws"):
         pooled_over_seeds(per_seed, np.zeros((3, 3), np.int64))
+
+
+def test_seed_predictions_are_every_seed_of_a_cnn_row_and_the_one_file_of_cfar(tmp_path):
+    from zendar_baselines.bench.claims import seed_predictions
+
+    cnn, cfar = tmp_path / "rows" / "fpn-resnet34-supervised", tmp_path / "rows" / "cfar"
+    for k in range(4):  # a leftover fourth seed of an earlier run with more seeds
+        (cnn / f"seed-{k}").mkdir(parents=True)
+    cfar.mkdir(parents=True)
+    assert seed_predictions(cnn, 3) == [cnn / f"seed-{k}" / "predictions.json" for k in range(3)]
+    assert seed_predictions(cfar, 3) == [cfar / "predictions.json"]

@@ -14,9 +14,9 @@ CFAR_PFA = 1e-4
 CLUSTER_EPS_M = 1.5  # about half a car length: one car's scatterers chain into one cluster
 
 # Along the line of sight, labelled centres lie this far beyond the clusters' centres: the median
-# over the clusters of the demo training split (the dataset and command of
-# zendar_dataset.detection.static_scene.DEFAULT_THRESHOLD_DB) with a label within 4 m. About half a car's
-# length: most cars are seen from behind or ahead, in the ego's own street.
+# over the clusters of the demo training split (`zendar-data synth ROOT --profile demo --scenes 5`,
+# `zendar-bench fit-chain ROOT --split train`) with a label within 4 m. About half a car's length:
+# most cars are seen from behind or ahead, in the ego's own street.
 DEFAULT_CENTRE_OFFSET_M = 2.09
 
 # How a cluster's dynamic members' scores make its score (before the dynamic share): their sum, or

@@ -96,7 +96,8 @@ class FramePoints:
         return cls(*(np.concatenate([getattr(p, name) for p in parts]) for name in cls._FIELDS))
 
     def retested(self, sar: SarTestParams) -> FramePoints:
-        """The same points with the SAR test's verdict under other settings."""
+        """The same points with the SAR test's verdict under another threshold (``sar.threshold_db``
+        alone: the values were read with the settings the points were made with)."""
         return FramePoints(self.points_xy, self.radar_xy, self.score, self.sar_db, is_dynamic(self.sar_db, sar))
 
 

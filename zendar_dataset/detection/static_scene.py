@@ -32,8 +32,11 @@ reading against the median at the same range from the radar, the reading minus t
 and combinations. Only the candidates that subtract the range-Doppler SNR reach 0.85 in every band
 (this one: 0.939 / 0.870 / 0.893; 0.986 / 0.917 / 0.958 on the validation scene); the combinations
 with a local or same-range background gain at most 0.025 in a training band, not on the validation
-scene. The threshold is measured on the training split with
-``zendar-bench fit-chain ROOT --split train`` (``zendar_baselines.classical.chain_fit``).
+scene (all with the 0.5 m window of the time; the window is now
+:attr:`SarTestParams.search_radius_m`, chosen in docs/baselines.md, "The SAR reading's window"). The
+detection chain's threshold is fitted on the training split (``zendar-bench fit-chain ROOT --split
+train``, ``zendar_baselines.classical.chain_fit``; per run in ``zendar-bench``); the default below is
+the automatic labels'.
 
 Points that no SAR image covers (beyond the images' 60 m, outside the radars' field of view, or with
 no SAR frame near their time), points in the radar's shadow (more than ``shadow_margin_m`` behind the
