@@ -202,6 +202,8 @@ def shared_resamples(keys: list[str], matched: Mapping[str, Sequence[MatchedDete
         When a row has no seed, or the rows' seeds were not scored on the same frames.
     """
     for key in keys:
+        if isinstance(matched[key], MatchedDetections):
+            raise ZendarError(f"row {key}: give a list of its seeds' matchings (one item for one seed), not a bare matching")
         if not matched[key]:
             raise ZendarError(f"row {key}: no seed's predictions to compare")
     first = matched[keys[0]][0]

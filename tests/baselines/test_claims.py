@@ -109,6 +109,11 @@ def test_too_few_blocks_give_no_interval_and_different_frames_are_refused():
                "x": [matched_detections({"results": _found(other)}, {"frames": other})]}
     with pytest.raises(ZendarError, match="row x: scored on other frames than row cfar"):
         claim_verdicts([Row("cfar", "CFAR", False, False), Row("x", "FPN ResNet-34", False, True)], matched)
+    rows = [Row("cfar", "CFAR", False, False), Row("x", "FPN ResNet-34", False, True)]
+    with pytest.raises(ZendarError, match="row x: give a list of its seeds' matchings"):
+        claim_verdicts(rows, {"cfar": matched["cfar"], "x": matched["cfar"][0]})
+    with pytest.raises(ZendarError, match="row x: no seed's predictions"):
+        claim_verdicts(rows, {"cfar": matched["cfar"], "x": []})
 
 
 def _heading(deg):
