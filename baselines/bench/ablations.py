@@ -33,11 +33,13 @@ shown". Outputs: ``ablations.md`` and ``results.json``'s ``ablations``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from zendar_dataset.detection import ChainParams, SarTestParams
+from zendar_dataset.eval.evaluate import MatchedDetections
 from zendar_dataset.eval.paired import FAILS, HOLDS, paired_difference
 from zendar_dataset.eval.protocol import RANGE_BANDS
 from zendar_dataset.eval.report import read_metrics
@@ -79,7 +81,7 @@ NO_DIFFERENCE = "no difference shown"
 @dataclass(frozen=True)
 class Ablation:
     """One ablation row: what it changes, the Table 1 row it is compared with, and where its first
-    seed's outputs are (``folder``, relative to the run directory)."""
+    seed's outputs are (``folder``, relative to the run directory: ``.../seed-0`` for a CNN row)."""
 
     name: str
     change: str
@@ -87,8 +89,21 @@ class Ablation:
     row: Row
     folder: str
 
+    def seed_folders(self) -> list[str]:
+        """Every seed's outputs folder, in seed order (one for a CFAR row), relative to the run directory."""
+        parent, name = self.folder.rpartition("/")[::2]
+        if not name.startswith("seed-"):
+            return [self.folder]
+        return [f"{parent}/seed-{k}" for k in range(len(self.row.seed_metrics))]
+
     def to_json(self) -> dict[str, Any]:
-        return self.row.to_json() | {"metrics": f"{self.folder}/metrics.json", "predictions": f"{self.folder}/predictions.json"}
+        """The row's JSON, with its first seed's ``metrics`` and ``predictions`` paths and every seed's
+        (``seed_outputs``: what the paired differences pool)."""
+        return self.row.to_json() | {
+            "metrics": f"{self.folder}/metrics.json", "predictions": f"{self.folder}/predictions.json",
+            "seed_outputs": [{"metrics": f"{folder}/metrics.json", "predictions": f"{folder}/predictions.json"}
+                             for folder in self.seed_folders()],
+        }
 
 
 def run_ablations(run: RunDirectory, context: RunContext, labels: TrainingLabels, keys: dict[str, str], seeds: int,
@@ -186,19 +201,29 @@ def _cfar_ablation(run: RunDirectory, context: RunContext, labels: TrainingLabel
                                              [read_metrics(row_dir / "metrics.json")]), f"{ABLATIONS_DIR}/{name}/row")
 
 
-def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation], seeds: int) -> list[dict[str, Any]]:
+def compare_ablations(run_path: Path, root: Path, ablations: list[Ablation], seeds: int,
+                      matched: Mapping[str, Sequence[MatchedDetections]] | None = None) -> list[dict[str, Any]]:
     """``results.json``'s ``ablations``: each row's AP (mean over seeds) and its paired differences
-    from its reference row per band (every seed, the claims' shared resamples and seed draws)."""
+    from its reference row per band (every seed, the claims' shared resamples and seed draws).
+
+    ``matched``: the Table 1 rows' matchings the claims already made (row key → per seed,
+    :func:`zendar_baselines.bench.claims.matched_seeds`); a reference row found there is not matched
+    again. The others are matched from ``rows/<key>``.
+    """
     from zendar_baselines.bench.claims import matched_predictions, seed_predictions, shared_resamples
 
     def row_dir(ablation: Ablation) -> Path:
         folder = run_path / ablation.folder  # a CNN row's first seed, or the CFAR row itself
         return folder.parent if folder.name.startswith("seed-") else folder
 
+    known = {} if matched is None else matched
     paths = {ablation.row.key: seed_predictions(row_dir(ablation), seeds) for ablation in ablations}
-    paths.update({ablation.reference: seed_predictions(run_path / "rows" / ablation.reference, seeds) for ablation in ablations})
-    keys = list(paths)
-    aps, resampling = shared_resamples(keys, matched_predictions(paths, root))
+    paths.update({ablation.reference: seed_predictions(run_path / "rows" / ablation.reference, seeds)
+                  for ablation in ablations if ablation.reference not in known})
+    matchings = matched_predictions(paths, root)
+    matchings.update({ablation.reference: known[ablation.reference] for ablation in ablations
+                      if ablation.reference in known})
+    aps, resampling = shared_resamples(list(matchings), matchings)
     out = []
     for ablation in ablations:
         comparisons = {}

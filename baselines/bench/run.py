@@ -351,7 +351,8 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
 
     config, out = context.config, context.run_path
     title = f"Moving-car AP on the test split, config {config.name}, {seeds} seed(s) (paper Table 1 beside)"
-    verdicts = claim_verdicts(rows, matched_seeds(out, rows, context.root, seeds))
+    matched = matched_seeds(out, rows, context.root, seeds)
+    verdicts = claim_verdicts(rows, matched)
     problem = next(iter(verdicts.values()))["resampling"].get("problem")
     if problem:
         say(f"[claims] {problem}")
@@ -381,7 +382,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[Row], quality: di
     if ablations is not None:
         from zendar_baselines.bench.ablations import compare_ablations, markdown_ablations
 
-        results["ablations"] = compare_ablations(out, context.root, ablations, seeds)
+        results["ablations"] = compare_ablations(out, context.root, ablations, seeds, matched)
         ablation_table = markdown_ablations(results["ablations"], {row.key: row.ap_mean() for row in rows})
         write_text_atomic(out / "ablations.md", "### Ablations, paired intervals (AP points)\n\n" + ablation_table)
         table += "\n### Ablations, paired intervals (AP points)\n\n" + ablation_table

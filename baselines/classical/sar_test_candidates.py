@@ -43,6 +43,7 @@ from zendar_dataset.detection import (
     ON_CAR_MARGIN_M,
     ChainParams,
     LabelBoxes,
+    SarTestParams,
     cfar_map,
     cube_power,
     frame_cube_points,
@@ -53,7 +54,7 @@ from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.protocol import ALL_BAND, BANDS_M, RANGE_BANDS
 from zendar_dataset.format.reader import open_dataset
 from zendar_dataset.geometry.frames import ego_T_sensor
-from zendar_dataset.sar.frames import SarFrames
+from zendar_dataset.sar.frames import SAR_SEARCH_RADIUS_M, SarFrames
 
 LOCAL_HALF_WIDTHS_M = (1.0, 2.0, 4.0)
 RANGE_RING_M = 0.5
@@ -221,11 +222,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("root", help="dataset root")
     parser.add_argument("--splits", default="train,val", help="comma-separated splits (default: train,val)")
+    parser.add_argument("--search-radius-m", type=float, default=SAR_SEARCH_RADIUS_M, metavar="M",
+                        help="a point's SAR reading: the brightest pixel within M metres of its projection "
+                             f"(default: {SAR_SEARCH_RADIUS_M:g}, the chain's)")
     args = parser.parse_args(argv)
 
     def tables() -> None:
+        params = ChainParams(sar=SarTestParams(search_radius_m=args.search_radius_m))
         for split in args.splits.split(","):
-            table = auc_table(candidate_values(args.root, split))
+            table = auc_table(candidate_values(args.root, split, params))
             print(f"\nsplit {split}\n\n| candidate | " + " | ".join((*RANGE_BANDS, ALL_BAND)) + " |")
             print("|---|" + "---:|" * (len(RANGE_BANDS) + 1))
             for name, row in table.items():

@@ -466,3 +466,27 @@ def test_ablation_differences_pool_every_seed_of_both_rows(quick_run, tmp_path):
             assert comparison["difference"] is None
         else:
             assert comparison["difference"] == pytest.approx(first_ap[band] / 2, abs=1e-4)
+    # The claims' matching of the reference is reused, not made again from rows/: given the ablation's
+    # own seeds as the reference's matching, every difference is 0.
+    from zendar_baselines.bench.claims import matched_predictions, seed_predictions
+
+    same = matched_predictions({"r": seed_predictions(tmp_path / "run" / "ablations/x/fpn-resnet34-supervised", 2)}, dataset)
+    [again] = compare_ablations(tmp_path / "run", dataset, [ablation], seeds=2, matched={"fpn-resnet34-supervised": same["r"]})
+    assert all(c["difference"] in (None, 0.0) for c in again["minus_reference"].values())
+
+
+def test_an_ablation_records_every_seed_outputs(quick_run):
+    from zendar_dataset.eval.report import read_metrics
+
+    from zendar_baselines.bench.ablations import Ablation
+    from zendar_baselines.bench.results_table import Row
+
+    home, _ = quick_run
+    metrics = read_metrics(home / "out" / "rows" / "fpn-resnet34-supervised" / "seed-0" / "metrics.json")
+    row = Row("fpn-resnet34-supervised-x", "FPN ResNet-34", False, True, [metrics, metrics, metrics])
+    record = Ablation("x", "nothing", "fpn-resnet34-supervised", row, "ablations/x/seed-0").to_json()
+    assert record["metrics"] == "ablations/x/seed-0/metrics.json"
+    assert record["seed_outputs"] == [{"metrics": f"ablations/x/seed-{k}/metrics.json",
+                                       "predictions": f"ablations/x/seed-{k}/predictions.json"} for k in range(3)]
+    cfar = Ablation("y", "nothing", "cfar", Row("cfar-y", "CFAR", False, False, [metrics]), "ablations/y/row").to_json()
+    assert cfar["seed_outputs"] == [{"metrics": "ablations/y/row/metrics.json", "predictions": "ablations/y/row/predictions.json"}]

@@ -46,3 +46,25 @@ def test_the_chosen_candidate_is_the_chains_value_on_the_chains_points(tiny_root
 def test_a_split_without_scenes_exits_2(tiny_root, capsys):
     assert main([str(tiny_root), "--splits", "val"]) == 2
     assert "has no labelled scene" in capsys.readouterr().err
+
+
+def test_the_cli_reads_with_the_window_it_is_given(tiny_root, capsys, monkeypatch):
+    """``--search-radius-m`` reaches the reading; the default is the chain's window."""
+    from zendar_baselines.classical import sar_test_candidates
+
+    used = []
+    real = sar_test_candidates.candidate_values
+    monkeypatch.setattr(sar_test_candidates, "candidate_values",
+                        lambda root, split, params: used.append(params.sar.search_radius_m) or real(root, split, params))
+    assert main([str(tiny_root), "--splits", "train"]) == 0
+    assert main([str(tiny_root), "--splits", "train", "--search-radius-m", "0.5"]) == 0
+    assert used == [SarTestParams().search_radius_m, 0.5]
+    default, wide = (block.split("| reading |")[1].split("\n")[0] for block in capsys.readouterr().out.split("split train")[1:])
+    assert default != wide  # the wider window reads other pixels
+
+
+@pytest.mark.parametrize("radius", ["-1", "nan"])
+def test_the_cli_refuses_a_bad_window(tiny_root, capsys, radius):
+    assert main([str(tiny_root), "--splits", "train", "--search-radius-m", radius]) == 2
+    err = capsys.readouterr().err
+    assert "search_radius_m" in err and "Traceback" not in err
