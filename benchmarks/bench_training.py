@@ -1,6 +1,9 @@
 """Claim: ``train`` runs at the speed of a plain PyTorch loop on demo-sized inputs (within 10 %), for
 each detector at width 0.25 (``--width``; the demo config trains at 0.125); it reports training frames
 per second. ``train`` runs channels-last (``MEMORY_FORMAT``), the plain loop NCHW, as a user writes it.
+A third side is ``train`` with torch's deterministic mode filling new tensors with NaN (its default,
+``FILL_UNINITIALIZED_MEMORY`` True), which ``train`` switches off: the column "fill / package" is
+what that costs.
 
 Run: python benchmarks/bench_training.py [--models fpn-resnet34 densenet-37 densenet-67] [--width 0.25]
                                          [--frames 60] [--repeats 3] [--threads 2]
@@ -36,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 from zendar_baselines.bench.configs import MODEL_NAMES, Schedule  # noqa: E402
 from zendar_baselines.cnn.mask_frames import MaskFrames  # noqa: E402
 from zendar_baselines.cnn.models import build_model  # noqa: E402
+from zendar_baselines.cnn import training  # noqa: E402
 from zendar_baselines.cnn.training import positive_class_weight, seed_everything, train  # noqa: E402
 
 N_RX, N_RANGE, N_DOPPLER, WINDOW = 4, 256, 64, 3
@@ -86,37 +90,45 @@ def main() -> None:
     parser.add_argument("--width", type=float, default=0.25, help="the models' width scale")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
+    training.TRAINING_THREADS = args.threads  # what train() pins while training
     print_environment(["torch", "numpy"])
     print(f"threads: {args.threads} (torch intra-op) for both sides")
     data = demo_scene(args.frames)
     schedule = Schedule(lr=1e-3, batch_size=16, epochs=1)
     pos_weight = positive_class_weight(data)
     print(f"inputs: {len(data)} samples of [{data.in_channels}, {N_RANGE}, {N_DOPPLER}], batch {schedule.batch_size}, 1 epoch")
-    print(f"{'model':<14} {'package frames/s':>24} {'plain frames/s':>24} {'package / plain time':>22}")
+    print(f"{'model':<14} {'package frames/s':>24} {'plain frames/s':>24} {'package / plain time':>22} "
+          f"{'fill / package time':>20}")
     with tempfile.TemporaryDirectory() as scratch:
         for name in args.models:
             seed_everything(0)
             initial = build_model(name, data.in_channels, args.width).state_dict()
             calls = {"package": 0}
 
-            def package() -> None:
+            def package(fill: bool = False) -> None:
                 seed_everything(0)
                 model = build_model(name, data.in_channels, args.width)
                 model.load_state_dict(initial)
                 calls["package"] += 1
                 out_dir = Path(scratch) / f"{name}-{calls['package']}"
-                train(model, data, schedule, seed=0, out_dir=out_dir, progress=False)
+                training.FILL_UNINITIALIZED_MEMORY = fill
+                try:
+                    train(model, data, schedule, seed=0, out_dir=out_dir, progress=False)
+                finally:
+                    training.FILL_UNINITIALIZED_MEMORY = False
 
             def plain() -> None:
                 model = build_model(name, data.in_channels, args.width)
                 model.load_state_dict(initial)
                 plain_epoch(model, data, schedule, pos_weight, seed=0)
 
-            spreads = interleaved({"package": package, "plain": plain}, repeats=args.repeats)
+            spreads = interleaved({"package": package, "plain": plain, "fill": lambda: package(fill=True)},
+                                  repeats=args.repeats)
             ratio = spreads["package"].median / spreads["plain"].median
+            fill_ratio = spreads["fill"].median / spreads["package"].median
             package_rate = frames_per_second(len(data), spreads["package"])
             plain_rate = frames_per_second(len(data), spreads["plain"])
-            print(f"{name:<14} {package_rate:>24} {plain_rate:>24} {ratio:>22.3f}")
+            print(f"{name:<14} {package_rate:>24} {plain_rate:>24} {ratio:>22.3f} {fill_ratio:>20.3f}")
     print_load_after()
 
 

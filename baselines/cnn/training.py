@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.distributed as dist
+import torch.utils.deterministic
 import torch.nn.functional as F
 from torch import nn
 from torch.utils.data import ConcatDataset, DataLoader, Dataset, Subset
@@ -73,6 +74,13 @@ TRAINING_THREADS = 1
 #: is set (unless the environment sets it) when this module is imported, before any model runs.
 ONEDNN_MAX_CPU_ISA = "AVX2"
 os.environ.setdefault("ONEDNN_MAX_CPU_ISA", ONEDNN_MAX_CPU_ISA)
+#: Whether torch's deterministic mode fills every newly allocated tensor with NaN
+#: (``torch.utils.deterministic.fill_uninitialized_memory``, on by default in that mode). The filling
+#: exists to expose reads of uninitialised memory, which no op of these models makes: the weights and
+#: predictions of every architecture are bit-identical with and without it (tests/baselines/
+#: test_training.py), and it took a fifth of a demo training step (DenseNet-37, width 0.125, batch
+#: 16, one thread: 0.46 s with it, 0.37 s without; ``benchmarks/bench_training.py``).
+FILL_UNINITIALIZED_MEMORY = False
 #: The layout of the models' weights and inputs while training and predicting. In channels-last
 #: oneDNN's convolutions and ATen's batch norm need no reorders: a training step of the demo config's
 #: DenseNet-37 and FPN-ResNet-34 (width 0.125, batch 16 of 12 × 256 × 64, one thread) took 0.322 and
@@ -234,20 +242,23 @@ def seed_everything(seed: int) -> None:
 @contextmanager
 def deterministic_torch(threads: int | None = None) -> Iterator[None]:
     """Within the block: torch's deterministic algorithms (a warning where an op has none) and ``threads``
-    intra-op threads (default :data:`TRAINING_THREADS`); the previous settings come back afterwards.
+    intra-op threads (default :data:`TRAINING_THREADS`), deterministic mode's filling of new tensors
+    as :data:`FILL_UNINITIALIZED_MEMORY` says; the previous settings come back afterwards.
 
     On CUDA, cuBLAS needs ``CUBLAS_WORKSPACE_CONFIG`` for deterministic matrix products; it is set
     (``:4096:8``) unless the environment already sets it.
     """
     previous = (torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled(),
-                torch.get_num_threads())
+                torch.get_num_threads(), torch.utils.deterministic.fill_uninitialized_memory)
     os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     torch.use_deterministic_algorithms(True, warn_only=True)
+    torch.utils.deterministic.fill_uninitialized_memory = FILL_UNINITIALIZED_MEMORY
     torch.set_num_threads(TRAINING_THREADS if threads is None else threads)
     try:
         yield
     finally:
         torch.use_deterministic_algorithms(previous[0], warn_only=previous[1])
+        torch.utils.deterministic.fill_uninitialized_memory = previous[3]
         torch.set_num_threads(previous[2])
 
 
@@ -721,6 +732,7 @@ def predict_masks(
 __all__ = [
     "MAX_POS_WEIGHT",
     "MEMORY_FORMAT",
+    "FILL_UNINITIALIZED_MEMORY",
     "ONEDNN_MAX_CPU_ISA",
     "TRAINING_THREADS",
     "TrainResult",

@@ -403,7 +403,8 @@ class _SettingsSpy(TinyMaskNet):
     seen: set
 
     def forward(self, inputs):
-        self.seen.add((torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()))
+        self.seen.add((torch.get_num_threads(), torch.are_deterministic_algorithms_enabled(),
+                       torch.utils.deterministic.fill_uninitialized_memory))
         return super().forward(inputs)
 
 
@@ -416,8 +417,33 @@ def test_training_runs_deterministic_with_a_fixed_thread_count_and_restores_the_
     spy.seen = set()
     assert not torch.are_deterministic_algorithms_enabled()
     train(spy, task_data, SCHEDULE, seed=0, out_dir=tmp_path, validation=task_data, progress=False)
-    assert spy.seen == {(TRAINING_THREADS, True)}
+    fill_before = torch.utils.deterministic.fill_uninitialized_memory
+    assert spy.seen == {(TRAINING_THREADS, True, False)}
     assert torch.get_num_threads() == before and not torch.are_deterministic_algorithms_enabled()
+    assert torch.utils.deterministic.fill_uninitialized_memory is fill_before
+
+
+@pytest.mark.parametrize("name", ["fpn-resnet34", "densenet-37", "densenet-67"])
+def test_no_op_of_the_models_reads_uninitialised_memory(tmp_path, monkeypatch, name):
+    """Training and predicting without deterministic mode's NaN filling of new tensors (what makes it
+    faster) gives bit for bit the weights and probabilities of a run with it: a op that read memory it
+    never wrote would read NaN in one run and leftovers in the other."""
+    from zendar_baselines.cnn import training
+    from zendar_baselines.cnn.models import build_model
+
+    inputs = np.random.default_rng(3).standard_normal((8, 6, 32, 16)).astype(np.float32)
+    masks = np.random.default_rng(4).integers(0, 3, (8, 32, 16)).astype(np.uint8)
+    data = MaskFrames(inputs, masks)
+    runs = []
+    for fill in (True, False):
+        monkeypatch.setattr(training, "FILL_UNINITIALIZED_MEMORY", fill)
+        seed_everything(0)
+        model = build_model(name, 6, 0.125)
+        train(model, data, Schedule(lr=1e-3, batch_size=4, epochs=1), seed=0, out_dir=tmp_path / str(fill), progress=False)
+        runs.append((_weights(model), predict_masks(model, inputs, batch_size=4)))
+    _assert_same_weights(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    assert np.isfinite(runs[1][1]).all()
 
 
 def test_the_weights_do_not_depend_on_the_callers_thread_count(tmp_path, task_data):
