@@ -78,8 +78,8 @@ os.environ.setdefault("ONEDNN_MAX_CPU_ISA", ONEDNN_MAX_CPU_ISA)
 #: (``torch.utils.deterministic.fill_uninitialized_memory``, on by default in that mode). The filling
 #: exists to expose reads of uninitialised memory, which no op of these models makes: the weights and
 #: predictions of every architecture are bit-identical with and without it (tests/baselines/
-#: test_training.py), and it took a fifth of a demo training step (DenseNet-37, width 0.125, batch
-#: 16, one thread: 0.46 s with it, 0.37 s without; ``benchmarks/bench_training.py``).
+#: test_training.py), and it made a demo training epoch 8-13 % longer (width 0.125, batch 16, one
+#: thread; ``benchmarks/bench_training.py``, docs/baselines.md "Speed").
 FILL_UNINITIALIZED_MEMORY = False
 #: The layout of the models' weights and inputs while training and predicting. In channels-last
 #: oneDNN's convolutions and ATen's batch norm need no reorders: a training step of the demo config's
