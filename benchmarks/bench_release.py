@@ -4,9 +4,12 @@ A synthetic release scene is written once (vectorised encoders, laid out as
 the fact sheet says): magnitude SAR images of two radars, range-Doppler cubes
 of paper size, lidar sweeps of 30 000 points, detections and a tracklog.  Then,
 alternating, (a) a plain read of every file (``read`` into one reused buffer,
-the floor for any reader) and (b) the full import into a fresh format-v1
-dataset (decode, convert, write, rename).  Throughput is MB of input per
-second; the ratio b/a is the claim (aim: at least 0.1).  The decode-only rate
+the floor for any reader), (b) a plain copy of the files into a fresh directory
+(``shutil.copytree``: the input's bytes read and written once, the floor for
+any importer that stores what it reads uncompressed) and (c) the full import
+into a fresh format-v1 dataset (decode, convert, write, rename).  Throughput is
+MB of input per second; the ratio c/a is the claim (aim: at least 0.1); c/b
+says how far the import is from the copy.  The decode-only rate
 (every record decoded into arrays, nothing written; aim: at least 0.3 of a plain
 read) and the import's seconds by step (decode, and inside the format writer its
 checks and copies, checksums, array writes and metadata) are printed too, to
@@ -268,11 +271,15 @@ def main() -> None:
         print(f"release: {size / 1e6:.1f} MB in {len(list(src.rglob('*.pbs')))} streams")
         import_release(src, work / "warm", log=None)  # compile the numba scanner, warm the page cache
         shutil.rmtree(work / "warm")
-        plain, full, decode, in_writer, parts = [], [], [], [], []
+        plain, copy, full, decode, in_writer, parts = [], [], [], [], [], []
         for r in range(args.repeats):
             start = time.perf_counter()
             plain_read(src)
             plain.append(time.perf_counter() - start)
+            start = time.perf_counter()
+            shutil.copytree(src, work / f"copy{r}")
+            copy.append(time.perf_counter() - start)
+            shutil.rmtree(work / f"copy{r}")
             start = time.perf_counter()
             decode_only(src)
             decode.append(time.perf_counter() - start)
@@ -288,12 +295,14 @@ def main() -> None:
             parts.append(clock.parts)
             shutil.rmtree(out)
         mb = size / 1e6
-        for label, times in (("plain read", plain), ("decode only", decode), ("import-release", full)):
+        for label, times in (("plain read", plain), ("plain copy", copy), ("decode only", decode), ("import-release", full)):
             print(f"{label:<16} {mb / statistics.median(times):8.1f} MB/s median, {mb / min(times):8.1f} MB/s best  "
                   f"(of {len(times)}; min {min(times):.3f} s, median {statistics.median(times):.3f} s, max {max(times):.3f} s)")
-        for label, times in (("import", full), ("decode only", decode)):
+        for label, times in (("import", full), ("decode only", decode), ("plain copy", copy)):
             print(f"{label} / plain read: {statistics.median(plain) / statistics.median(times):.3f} (medians), "
                   f"{min(plain) / min(times):.3f} (bests)")
+        print(f"import / plain copy: {statistics.median(copy) / statistics.median(full):.3f} (medians), "
+              f"{min(copy) / min(full):.3f} (bests)")
         share = statistics.median(w / f for w, f in zip(in_writer, full))
         print(f"share of the import spent in the format writer (SceneWriter): {share:.0%}; the import's seconds "
               f"(median of {len(full)}):")
