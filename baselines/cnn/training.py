@@ -251,10 +251,10 @@ def deterministic_torch(threads: int | None = None) -> Iterator[None]:
     previous = (torch.are_deterministic_algorithms_enabled(), torch.is_deterministic_algorithms_warn_only_enabled(),
                 torch.get_num_threads(), torch.utils.deterministic.fill_uninitialized_memory)
     os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    torch.use_deterministic_algorithms(True, warn_only=True)
-    torch.utils.deterministic.fill_uninitialized_memory = FILL_UNINITIALIZED_MEMORY
-    torch.set_num_threads(TRAINING_THREADS if threads is None else threads)
     try:
+        torch.use_deterministic_algorithms(True, warn_only=True)
+        torch.utils.deterministic.fill_uninitialized_memory = FILL_UNINITIALIZED_MEMORY
+        torch.set_num_threads(TRAINING_THREADS if threads is None else threads)
         yield
     finally:
         torch.use_deterministic_algorithms(previous[0], warn_only=previous[1])

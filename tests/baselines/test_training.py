@@ -412,12 +412,13 @@ def test_training_runs_deterministic_with_a_fixed_thread_count_and_restores_the_
     from zendar_baselines.cnn.training import TRAINING_THREADS
 
     before = torch.get_num_threads()
+    fill_before = torch.utils.deterministic.fill_uninitialized_memory
+    assert fill_before is True  # torch's default: the check below sees a restore, not a value left behind
     seed_everything(0)
     spy = _SettingsSpy(2)
     spy.seen = set()
     assert not torch.are_deterministic_algorithms_enabled()
     train(spy, task_data, SCHEDULE, seed=0, out_dir=tmp_path, validation=task_data, progress=False)
-    fill_before = torch.utils.deterministic.fill_uninitialized_memory
     assert spy.seen == {(TRAINING_THREADS, True, False)}
     assert torch.get_num_threads() == before and not torch.are_deterministic_algorithms_enabled()
     assert torch.utils.deterministic.fill_uninitialized_memory is fill_before
