@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import pathlib
 from dataclasses import dataclass, field
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -633,30 +634,43 @@ class DatasetWriter:
         self._writers[scene_id] = writer
         return writer
 
-    def finalize(self, splits: dict[str, list[str]]) -> None:
+    def finalize(self, splits: dict[str, list[str]], existing_paths: Mapping[str, str] | None = None) -> None:
         """Write ``dataset.json`` atomically.
 
-        It lists the scenes completed through this writer plus any scene named in
-        ``splits`` whose store exists; a split naming a scene that is not complete raises.
+        It lists the scenes completed through this writer, the scenes of ``existing_paths``, and any
+        scene named in ``splits`` whose store exists; a split naming a scene that is not complete raises.
+
+        Parameters
+        ----------
+        splits : dict of str to list of str
+            Split name -> scene ids.
+        existing_paths : mapping of str to str, optional
+            Scene id -> store path relative to the root, of scenes written earlier (by another run,
+            possibly in the other backend): listed as they are.
         """
+        known = dict(existing_paths or {})
+        suffix = BACKEND_SUFFIX[self.backend]
+
+        def relative_path(scene_id: str) -> str:
+            return known.get(scene_id, f"scenes/{_check_scene_id(scene_id)}{suffix}")
+
         problems = []
         for split, scene_ids in splits.items():
             if not isinstance(split, str) or not isinstance(scene_ids, (list, tuple)):
                 problems.append(f"splits: expected {{name: [scene_id, ...]}}, found {split!r}: {scene_ids!r}")
                 continue
             for scene_id in scene_ids:
-                if not self.scene_path(scene_id).exists():
-                    problems.append(f"splits.{split}: scene {scene_id!r} is not complete ({self.scene_path(scene_id)} missing)")
+                if not (self.root / relative_path(scene_id)).exists():
+                    problems.append(f"splits.{split}: scene {scene_id!r} is not complete ({self.root / relative_path(scene_id)} missing)")
         if problems:
             raise ZendarFormatError(f"{self.root}: cannot finalize: " + "; ".join(problems), problems)
         completed = {scene_id for scene_id, writer in self._writers.items() if writer.completed}
-        completed |= {scene_id for scene_ids in splits.values() for scene_id in scene_ids}
-        suffix = BACKEND_SUFFIX[self.backend]
+        completed |= {scene_id for scene_ids in splits.values() for scene_id in scene_ids} | set(known)
         document = {
             "format": FORMAT_NAME,
             "format_version": FORMAT_VERSION,
             "name": self.name,
             "splits": {**{split: [] for split in SPLITS}, **{k: list(v) for k, v in splits.items()}},
-            "scenes": {scene_id: {"path": f"scenes/{scene_id}{suffix}"} for scene_id in sorted(completed)},
+            "scenes": {scene_id: {"path": relative_path(scene_id)} for scene_id in sorted(completed)},
         }
         write_json_atomic(self.root / DATASET_JSON, document)

@@ -20,7 +20,7 @@ from typing import TypeVar
 from zendar_dataset.errors import ZendarFormatError
 from zendar_dataset.release import records as rec
 from zendar_dataset.release.messages import RD_MODEL, Kind
-from zendar_dataset.release.stream import ReleaseStream, UnknownMessageError
+from zendar_dataset.release.stream import NoRecordsError, ReleaseStream, UnknownMessageError
 from zendar_dataset.release.summary import StreamSummary
 from zendar_dataset.release.wire import WireError, decode
 
@@ -56,8 +56,13 @@ def open_stream(path: pathlib.Path, src: pathlib.Path, skip_corrupt: bool, probl
         return OpenedStream(path, None, summary, model)
     try:
         stream = ReleaseStream(path, skip_corrupt=skip_corrupt)
+    except NoRecordsError as exc:
+        summary.framing = exc.framing
+        summary.skipped.append(f"empty: {exc}")
+        return OpenedStream(path, None, summary)
     except UnknownMessageError as exc:
         # Sound framing, unknown content (a message the release's schemas do not define): not the user's error.
+        summary.framing = exc.framing
         summary.skipped.append(f"no known message decodes it: {exc}")
         return OpenedStream(path, None, summary)
     except ZendarFormatError as exc:

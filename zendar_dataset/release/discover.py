@@ -19,6 +19,8 @@ import pathlib
 import re
 from dataclasses import dataclass, field
 
+from zendar_dataset.errors import ZendarError
+
 _DATE_TIME = re.compile(r"^\d{4}-\d{2}-\d{2}_\d{4,6}$")
 _NUMBER = re.compile(r"^\d{1,4}$")
 _FLAT = re.compile(r"^\d{4}-\d{2}-\d{2}_\d{4,6}_\d{1,4}$")
@@ -55,18 +57,54 @@ def scene_id_from_name(name: str) -> str:
     return cleaned
 
 
+def stream_files(src: pathlib.Path) -> list[pathlib.Path]:
+    """The stream files under the folder ``src``, sorted, following linked folders (a release put
+    together from links to its scenes) and entering each real folder once (a link to a folder above
+    would otherwise loop)."""
+    visited: set[tuple[int, int]] = set()
+    found = []
+    for folder, subfolders, names in os.walk(src, followlinks=True):
+        status = os.stat(folder)
+        if (status.st_dev, status.st_ino) in visited:
+            subfolders.clear()
+            continue
+        visited.add((status.st_dev, status.st_ino))
+        found.extend(path for path in (pathlib.Path(folder, name) for name in names) if is_stream_file(path))
+    return sorted(found)
+
+
 def find_scenes(src: pathlib.Path) -> list[SceneSource]:
-    """Every scene under ``src`` with its stream files, in id order (empty when none)."""
-    src = src.resolve()
+    """Every scene under ``src`` with its stream files, in id order (empty when none).
+
+    Scene ids come from the path as given (a linked folder is named as the link, not its target).
+
+    Raises
+    ------
+    ZendarError
+        When two different folders give the same scene id (e.g. ``a/2020-02-21_0900/001`` and
+        ``b/2020-02-21_0900/001``, or a date folder's ``001`` and a flattened ``…_001``), all listed:
+        they would be imported as one scene.
+    """
+    src = pathlib.Path(os.path.abspath(src))
     scenes: dict[str, SceneSource] = {}
-    files = [src] if src.is_file() else sorted(p for p in src.rglob("*") if is_stream_file(p))
-    for path in files:
+    clashes: dict[str, set[pathlib.Path]] = {}
+    for path in [src] if src.is_file() else stream_files(src):
         found = _scene_of(path)
         if found is None:
             base = src if src.is_dir() else src.parent
             found = (scene_id_from_name(base.name), base)
         scene_id, folder = found
-        scenes.setdefault(scene_id, SceneSource(scene_id, folder)).files.append(path)
+        scene = scenes.setdefault(scene_id, SceneSource(scene_id, folder))
+        if scene.folder != folder:
+            clashes.setdefault(scene_id, {scene.folder}).add(folder)
+            continue
+        scene.files.append(path)
+    if clashes:
+        listed = "; ".join(f"{scene_id}: {', '.join(str(f) for f in sorted(folders))}" for scene_id, folders in sorted(clashes.items()))
+        raise ZendarError(
+            f"{src}: different folders give the same scene id ({listed}); import each of them on its own, "
+            "with --scene-id to tell them apart"
+        )
     return [scenes[k] for k in sorted(scenes)]
 
 

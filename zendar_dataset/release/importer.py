@@ -24,7 +24,7 @@ import numpy as np
 from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format import stores
-from zendar_dataset.format.schema import DATASET_JSON, SPLITS
+from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, SPLITS
 from zendar_dataset.format.writer import DatasetWriter
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
@@ -33,6 +33,7 @@ from zendar_dataset.release import sides as side_evidence
 from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
 from zendar_dataset.release.discover import SceneSource, find_scenes, fingerprint
 from zendar_dataset.release.pixel_order import vote_pixel_order
+from zendar_dataset.release.read_ahead import read_ahead
 from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
 from zendar_dataset.release.tracklog_attitude import attitude_evidence, check_attitude
 from zendar_dataset.release.wire import WireError
@@ -319,7 +320,7 @@ class _SceneImport:
         layout = None  # (holds, dtype) of the stream's first frame: format v1 keeps one image dtype per stream
         bad: dict[str, int] = {}
         shape = None
-        for frame in _sar_frames(opened):
+        for frame in read_ahead(_sar_frames(opened)):
             try:
                 image, holds = rec.sar_grid(frame, i_fastest)
             except ValueError as exc:
@@ -364,7 +365,7 @@ class _SceneImport:
         shape = (model.range_axis[2], model.doppler_axis[2], model.num_rx)
         stamps = _Stamps(opened.summary)
         bad = 0
-        for record in decoded_records(opened):
+        for record in read_ahead(decoded_records(opened)):
             data = record["data"]
             if len(data) != 8 * int(np.prod(shape)):
                 bad += 1
@@ -383,7 +384,7 @@ class _SceneImport:
     def _write_detections(self, out, name: str, opened: OpenedStream) -> None:
         stamps = _Stamps(opened.summary)
         times, offsets, parts = [], [0], []
-        for found in decoded_records(opened, rec.detections):
+        for found in read_ahead(decoded_records(opened, rec.detections)):
             ns = stamps.take(found.timestamp_s)
             if ns is None:
                 continue
@@ -404,7 +405,7 @@ class _SceneImport:
     def _write_lidar(self, out, name: str, opened: OpenedStream, enu: LocalENU) -> None:
         stamps = _Stamps(opened.summary)
         ecef_parts, dropped, points_in_enu = [], 0, False
-        for sweep in decoded_records(opened, rec.lidar_sweep):
+        for sweep in read_ahead(decoded_records(opened, rec.lidar_sweep)):
             local = sweep.position_local
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
@@ -455,17 +456,80 @@ class _SceneImport:
                 opened.stream.close()
 
 
-def _existing_splits(out: pathlib.Path) -> dict[str, list[str]]:
-    path = out / DATASET_JSON
-    if not path.exists():
-        return {}
+class _EarlierDataset:
+    """What an earlier import left in OUT: its ``dataset.json`` (name, splits, scenes and their stores,
+    whichever backend) and the scene stores on disk; all kept as they are by a later import."""
+
+    def __init__(self, out: pathlib.Path) -> None:
+        self.out = out
+        self.name: str | None = None
+        self.splits: dict[str, list[str]] = {}
+        self.paths: dict[str, str] = {}  # scene id -> store path relative to OUT
+        self.listed: set[str] = set()  # the scenes dataset.json lists
+        path = out / DATASET_JSON
+        if not path.exists():
+            return
+        try:
+            document = json.loads(path.read_text(encoding="utf-8"))
+            self.splits = {str(k): [str(s) for s in v] for k, v in document["splits"].items()}
+            self.paths = {str(k): str(v["path"]) for k, v in document.get("scenes", {}).items()}
+            self.listed = set(self.paths)
+            name = document.get("name")
+            self.name = name if isinstance(name, str) else None
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise ZendarError(
+                f"{path}: expected the dataset.json of an earlier import to resume, found unreadable JSON ({exc})"
+            ) from None
+
+    def missing(self) -> list[str]:
+        """A problem for every scene ``dataset.json`` lists (or puts in a split) without its store."""
+        problems = []
+        for scene_id in sorted(set(self.paths) | {s for ids in self.splits.values() for s in ids}):
+            if self.store_of(scene_id) is None:
+                where = self.paths.get(scene_id, f"scenes/{scene_id}.*")
+                problems.append(
+                    f"{self.out / DATASET_JSON}: lists scene {scene_id!r}, whose store {self.out / where} is missing; "
+                    "restore it, or take the scene out of dataset.json"
+                )
+        return problems
+
+    def store_of(self, scene_id: str) -> pathlib.Path | None:
+        """The scene's store in OUT: where ``dataset.json`` says, else ``scenes/<id>.zarr`` or ``.h5``
+        (an earlier import's scene whose run stopped before ``dataset.json``); None when there is none."""
+        if scene_id in self.paths:
+            path = self.out / self.paths[scene_id]
+            return path if path.exists() else None
+        for suffix in BACKEND_SUFFIX.values():
+            path = self.out / "scenes" / f"{scene_id}{suffix}"
+            if path.exists():
+                self.paths[scene_id] = path.relative_to(self.out).as_posix()
+                return path
+        return None
+
+
+def _named_serials(files: list[pathlib.Path]) -> set[str]:
+    """Radar serials a scene's file names give (``<serial>_images.pbs``, ``<serial>_points.pbs``)."""
+    return {serial for path in files for suffix in ("_images", "_points") if (serial := _prefix(path, suffix))}
+
+
+def _merged_summary(out: pathlib.Path, summary: ImportSummary) -> dict:
+    """``release_import.json``'s new content: this run's summary, where every scene an earlier run
+    imported keeps that run's account of it (its streams, skips, unknown fields and assumptions)
+    instead of "already imported", and the scenes of earlier runs not in this one are kept."""
+    document = summary.to_json()
+    path = out / SUMMARY_JSON
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-        return {k: list(v) for k, v in document["splits"].items()}
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ZendarError(
-            f"{path}: expected the dataset.json of an earlier import to resume, found unreadable JSON ({exc})"
-        ) from None
+        earlier = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
+        before = {s["scene_id"]: s for s in earlier.get("scenes", []) if isinstance(s, dict) and isinstance(s.get("scene_id"), str)}
+    except (ValueError, TypeError, AttributeError):
+        before = {}  # an unreadable summary of our own: this run's is all there is to write
+    merged = []
+    for scene in document["scenes"]:
+        prior = before.pop(scene["scene_id"], None)
+        merged.append(prior if prior is not None and scene["status"] == "already imported" else scene)
+    merged.extend(before.values())
+    document["scenes"] = sorted(merged, key=lambda scene: scene["scene_id"])
+    return document
 
 
 def _imported_from(scene_path: pathlib.Path) -> dict:
@@ -477,20 +541,28 @@ def _imported_from(scene_path: pathlib.Path) -> dict:
         store.close()
 
 
-def _check_stated_sides(stated: Mapping[str, str], imports: list[_SceneImport], problems: list[str]) -> None:
-    """Every stated side is left or right, given once, to a serial some scene to import holds."""
+def _check_stated_sides(stated: Mapping[str, str], imports: list[_SceneImport], scenes: list[SceneSource],
+                        problems: list[str]) -> bool:
+    """Every stated side is left or right, given once, to a serial some scene of SRC holds (one already
+    imported too, so that the same command run again resumes). Returns whether they can be used: a side
+    stated wrongly is the one problem to fix first (the sides decided without it would mislead)."""
     bad = {serial: side for serial, side in stated.items() if side not in side_evidence.SIDES}
     if bad:
         problems.append(f"--sides: sides must be left or right, got {bad}")
-    if len(set(stated.values())) != len(stated):
+    twice = len(set(stated.values())) != len(stated)
+    if twice:
         problems.append(f"--sides: one side is given to more than one serial ({stated})")
-    known = set().union(*(job.radar_serials() for job in imports)) if imports else set()
+    known = set().union(*(job.radar_serials() for job in imports), *(_named_serials(s.files) for s in scenes))
     unknown = sorted(set(stated) - known)
     if unknown:
         problems.append(
             f"--sides: {', '.join(unknown)} is not a radar serial of the scenes to import "
             f"(their serials: {', '.join(sorted(known)) or 'none'})"
         )
+    return not (bad or twice or unknown)
+
+
+_SPLIT_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
 def import_release(
@@ -536,6 +608,8 @@ def import_release(
     src_path, out_path = pathlib.Path(src), pathlib.Path(out)
     if not src_path.exists():
         raise ZendarError(f"{src_path}: no such release folder or file")
+    if not _SPLIT_NAME.match(split):
+        raise ZendarError(f"--split: expected a split name of letters, digits, '_' or '-' (e.g. {', '.join(SPLITS)}), got {split!r}")
     resolved_src, resolved_out = src_path.resolve(), out_path.resolve()
     if resolved_out == resolved_src or (src_path.is_dir() and resolved_src in resolved_out.parents):
         raise ZendarError(f"{out_path}: the output must lie outside the release folder {src_path} (it is never modified)")
@@ -547,23 +621,23 @@ def import_release(
             names = ", ".join(s.scene_id for s in scenes)
             raise ZendarError(f"--scene-id: {src_path} holds {len(scenes)} scenes ({names}); give it for one scene only")
         scenes[0].scene_id = scene_id
-    splits = _existing_splits(out_path)
+    earlier = _EarlierDataset(out_path)
     summary = ImportSummary(str(src_path), str(out_path))
-    base = resolved_src if src_path.is_dir() else resolved_src.parent
-    writer = DatasetWriter(out_path, "zendar-release", backend=backend, overwrite=True)
+    absolute_src = pathlib.Path(os.path.abspath(src_path))  # as find_scenes names the files
+    base = absolute_src if src_path.is_dir() else absolute_src.parent
     imports = []
-    problems: list[str] = []
+    problems: list[str] = earlier.missing()
     try:
         for source in scenes:
             digest = fingerprint(source.files)
-            existing = writer.scene_path(source.scene_id)
-            if existing.exists():
-                earlier = _imported_from(existing)
-                recorded = earlier.get("fingerprint")
+            existing = earlier.store_of(source.scene_id)
+            if existing is not None:
+                imported_from = _imported_from(existing)
+                recorded = imported_from.get("fingerprint")
                 if recorded is not None and recorded != digest:
                     problems.append(
                         f"{existing}: scene {source.scene_id!r} already holds a different recording "
-                        f"(imported from {earlier.get('source')}; {source.folder} differs in content); "
+                        f"(imported from {imported_from.get('source')}; {source.folder} differs in content); "
                         "import it into another OUT or give it another --scene-id"
                     )
                     continue
@@ -572,8 +646,8 @@ def import_release(
                 continue
             imports.append(_SceneImport(source, base, skip_corrupt, problems, digest))
         stated = dict(sides or {})
-        _check_stated_sides(stated, imports, problems)
-        if not problems:
+        if _check_stated_sides(stated, imports, scenes, problems):
+            # Decided even when other problems were found, so that all of them are listed at once.
             for job in imports:
                 try:
                     job.decide_sides(stated)
@@ -581,6 +655,8 @@ def import_release(
                     problems.extend(exc.problems)
         if problems:
             raise ZendarFormatError(f"{src_path}: {len(problems)} problems: " + "; ".join(problems), problems)
+        # Only now, with nothing found wrong, is OUT created.
+        writer = DatasetWriter(out_path, earlier.name or "zendar-release", backend=backend, overwrite=True)
         for job in imports:
             if log:
                 log(job.source.scene_id)
@@ -590,11 +666,13 @@ def import_release(
     finally:
         for job in imports:
             job.close()
+    splits = earlier.splits
     for scene in summary.scenes:
-        if not any(scene.scene_id in ids for ids in splits.values()):
+        # A scene dataset.json lists already keeps its split, or none if its owner took it out of them.
+        if scene.scene_id not in earlier.listed and not any(scene.scene_id in ids for ids in splits.values()):
             splits.setdefault(split, []).append(scene.scene_id)
     for name in SPLITS:
         splits.setdefault(name, [])
-    writer.finalize(splits)
-    write_json_atomic(out_path / SUMMARY_JSON, summary.to_json())
+    writer.finalize(splits, existing_paths=earlier.paths)
+    write_json_atomic(out_path / SUMMARY_JSON, _merged_summary(out_path, summary))
     return summary

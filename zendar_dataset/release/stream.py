@@ -38,7 +38,17 @@ _SNIFF_RECORDS = 16
 
 
 class UnknownMessageError(ZendarFormatError):
-    """A stream whose framing is sound but whose records decode as no known message."""
+    """A stream whose framing is sound but whose records decode as no known message.
+
+    ``framing`` describes the framing decided (:meth:`Framing.describe`), for the import summary.
+    """
+
+    framing: str | None = None
+
+
+class NoRecordsError(UnknownMessageError):
+    """A stream with no non-empty record (an empty file, a header alone, empty records only): nothing
+    tells which message it holds, and there is nothing in it to convert."""
 
 
 @dataclass(frozen=True)
@@ -291,10 +301,11 @@ class ReleaseStream:
         self.framing, chain = _choose_framing(data, gzipped, candidates)
         try:
             self.kind = self._sniff(chain, candidates)
-        except UnknownMessageError:
+        except UnknownMessageError as exc:
             if not chain.tiles:
                 # Broken framing is the error to report, whatever the records hold.
                 self.report_problem(chain.end, len(data) - chain.end, f"truncated or corrupt: {chain.problem}")
+            exc.framing = self.framing.describe()
             raise
         self._offsets, self._lengths = self._records(chain)
 
@@ -365,7 +376,10 @@ class ReleaseStream:
             seen += 1
             if len(alive) == 1 or seen >= _SNIFF_RECORDS:
                 break
-        if not alive or seen == 0:
+        if seen == 0:
+            if len({kind.name for kind in candidates}) > 1:
+                # Taking a default kind would make an empty file a sensor (an empty Image stream a radar).
+                raise NoRecordsError(f"{self.path}: no non-empty record, so no message to tell its kind from and nothing to convert")
             kind = candidates[0]
             self.notes.append(f"no non-empty record to sniff; taken as {kind.label}")
             return kind
