@@ -1,10 +1,10 @@
 """The ``autolabels`` step of ``zendar-bench`` (and ``zendar-bench autolabels``): the automatic masks of
 a list of scenes in a mask store, one task per scene, in this process or on a Dask cluster.
 
-A task (:func:`label_scene`) opens its scene, makes every radar's automatic masks, writes the scene's
-file into the store atomically (on whichever host runs it: the store must be a directory every worker
-sees at the same path) and returns the file's manifest entry, with the masks' quality against the
-manual labels when asked. Only this process writes the manifest (:meth:`MaskStore.record_scene`), in
+A task (:func:`label_scene`) opens its scene, makes the automatic masks of every radar whose maps the
+CFAR window fits (:func:`labelled_radars`), writes the scene's file into the store atomically (on
+whichever host runs it: the store must be a directory every worker sees at the same path) and
+returns the file's manifest entry, with the masks' quality against the manual labels when asked. Only this process writes the manifest (:meth:`MaskStore.record_scene`), in
 the order the tasks finish; the masks do not depend on where or in which order they were made.
 """
 
@@ -27,6 +27,7 @@ from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
 
 from zendar_baselines.bench.steps import STORE_DIR, mask_parameters
+from zendar_baselines.classical.cfar_baseline import cfar_misfits
 from zendar_baselines.code_version import code_version
 from zendar_baselines.fingerprints import dataset_index, dataset_on_worker, task_root
 from zendar_baselines.labels.mask_store import MaskStore, RadarMasks, write_scene_file
@@ -86,20 +87,37 @@ class LabelledScene:
     scores: list[dict[str, Any]]
 
 
+def labelled_radars(reader: SceneReader) -> list[str]:
+    """The radars of one open scene that get automatic masks: those whose maps the CFAR window fits
+    (the automatic labels start from CFAR peaks; :func:`~zendar_baselines.classical.cfar_baseline.cfar_misfits`).
+
+    Raises
+    ------
+    ZendarError
+        When there is none, saying why.
+    """
+    misfits = cfar_misfits(reader)
+    radars = [radar for radar in reader.sensors("radar") if radar not in misfits]
+    if not radars:
+        why = "; ".join(f"radar {radar}: {reason}" for radar, reason in misfits.items()) or "no range-Doppler cubes"
+        raise ZendarError(f"scene {reader.scene_id}: no radar to label automatically: {why}")
+    return radars
+
+
 def label_scene(task: AutoLabelTask) -> LabelledScene:
     """Make, write and (optionally) measure one scene's automatic masks (module docstring).
 
     Raises
     ------
     ZendarError
-        When this host cannot read the dataset (naming the host), or the scene has no labels to
-        measure against.
+        When this host cannot read the dataset (naming the host), the scene has no radar to label
+        (:func:`labelled_radars`), or no labels to measure against.
     """
     index = dataset_on_worker(task.root, task.storage_options, task.scene_id)
     with index.open_scene(task.scene_id) as reader:
+        radars = labelled_radars(reader)
         sar = SarFrames(reader)
-        auto = {radar: scene_masks(reader, radar, "auto", sar=sar, params=task.params, progress=False)
-                for radar in reader.sensors("radar")}
+        auto = {radar: scene_masks(reader, radar, "auto", sar=sar, params=task.params, progress=False) for radar in radars}
         entry = write_scene_file(task.store_dir, task.scene_id, auto)
         return LabelledScene(entry, _quality(reader, auto) if task.quality else [])
 
@@ -186,4 +204,4 @@ def _remove_orphans(cluster: DaskCluster, directory: Path) -> None:
         cluster.remove_orphaned_temporaries(directory)
 
 
-__all__ = ["AutoLabelTask", "LabelledScene", "label_scene", "write_auto_labels"]
+__all__ = ["AutoLabelTask", "LabelledScene", "label_scene", "labelled_radars", "write_auto_labels"]

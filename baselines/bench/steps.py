@@ -169,7 +169,8 @@ def scene_maps(reader: SceneReader, radar: str, cache_dir: Path, channels: Input
 def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupervisedSplit | None = None,
             channels: InputChannels = InputChannels()):
     """Training samples (windows of ``channels``' maps and the mask of their newest cube) of ``scenes``
-    from a mask store.
+    from a mask store, of each radar it holds masks of (the automatic labels leave out a radar whose
+    maps the CFAR window does not fit).
 
     With ``split``, only the samples whose newest cube lies in a labelled segment (the manual-label
     phases); without, every sample (pretraining on automatic labels). The windows' older maps may
@@ -185,8 +186,7 @@ def _frames(run: RunContext, scenes: list[str], store_dir: Path, split: SemiSupe
         masks = store.scene(scene_id)
         with run.kept_scenes().opened(scene_id) as scene:
             reader = scene.reader
-            for radar in reader.sensors("radar"):
-                timestamps, targets = masks[radar]
+            for radar, (timestamps, targets) in masks.items():
                 if not np.array_equal(timestamps, reader.timestamps(f"radar/{radar}")):
                     raise ZendarError(f"{store_dir}: the masks of {scene_id} {radar} do not match the dataset's cube "
                                       "times; the store was made from another dataset")

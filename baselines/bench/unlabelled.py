@@ -13,12 +13,17 @@ as in a full run (:mod:`run_directory`):
 
 Scoring, the supervised-only rows, fine-tuning and the paper's claims need manual labels: they are
 skipped, and ``results.json`` (``skipped``) and ``table.md`` list each with the reason.
+
+Each step leaves out the scenes without range-Doppler cubes and the radars whose maps are smaller than
+the CFAR window (:func:`usable_scenes`); ``results.json`` (``skipped``) and ``table.md`` list each with
+the reason, and a row whose split has no scene left is skipped with it.
 """
 
 from __future__ import annotations
 
 import platform
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,12 +40,17 @@ from zendar_baselines.bench.context import RowSeed, RunContext
 from zendar_baselines.bench.results_table import METHOD_NAMES
 from zendar_baselines.bench.run import say, step_times_s
 from zendar_baselines.bench.run_directory import RunDirectory, read_json
+from zendar_baselines.classical.cfar_baseline import cfar_misfits
 
 NO_LABELS = "the dataset has no manual labels"
 STATISTICS_FILE = "statistics.json"
 PREDICTIONS_FILE = "predictions.json"
 #: What a submission's meta needs that only its submitter knows (docs/leaderboard.md, "Submissions").
 SUBMITTER_FIELDS = ("team", "contact")
+NO_CUBES = "no range-Doppler cubes (no radar streams)"
+CFAR_STEP = "CFAR predictions"
+TRAIN_STEP = "automatic labels and pretraining"
+VAL_STEP = "automatic labels of the validation split"
 
 
 def has_no_labels(index: DatasetIndex) -> bool:
@@ -50,6 +60,63 @@ def has_no_labels(index: DatasetIndex) -> bool:
             if reader.labels() is not None:
                 return False
     return True
+
+
+# --- scenes and radars left out ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """A scene, or one radar of it, that a step leaves out, and why.
+
+    Attributes
+    ----------
+    step : str
+        The step (:data:`CFAR_STEP`, :data:`TRAIN_STEP` or :data:`VAL_STEP`).
+    scene_id : str
+    radar : str or None
+        None: the whole scene.
+    reason : str
+    """
+
+    step: str
+    scene_id: str
+    radar: str | None
+    reason: str
+
+    @property
+    def where(self) -> str:
+        """``scene <id>``, or ``scene <id>, radar <name>``."""
+        return f"scene {self.scene_id}" + ("" if self.radar is None else f", radar {self.radar}")
+
+    def to_json(self) -> dict[str, str]:
+        """Its entry of ``results.json``'s ``skipped``."""
+        return {"what": f"{self.step}: {self.where}", "reason": self.reason}
+
+
+def usable_scenes(dataset: DatasetIndex, scene_ids: list[str], step: str) -> tuple[list[str], list[LeftOut]]:
+    """The scenes of ``scene_ids`` that ``step`` uses, and what it leaves out, each with why (said on stderr).
+
+    ``step`` leaves out a scene without range-Doppler cubes and each radar whose maps the chain's CFAR
+    window does not fit (:func:`cfar_misfits`); it uses the scenes with a radar left.
+    """
+    usable, left_out = [], []
+    for scene_id in scene_ids:
+        with dataset.open_scene(scene_id) as reader:
+            radars, misfits = reader.sensors("radar"), cfar_misfits(reader)
+        if not radars:
+            left_out.append(LeftOut(step, scene_id, None, NO_CUBES))
+        left_out += [LeftOut(step, scene_id, radar, reason) for radar, reason in misfits.items()]
+        if len(misfits) < len(radars):
+            usable.append(scene_id)
+    for part in left_out:
+        say(f"[{step}] leaving out {part.where}: {part.reason}")
+    return usable, left_out
+
+
+def _all_left_out(split: str, left_out: list[LeftOut]) -> str:
+    """A row's reason when every scene of ``split`` is left out: the distinct reasons."""
+    return f"every scene of split {split!r} is left out: " + "; ".join(dict.fromkeys(part.reason for part in left_out))
 
 
 # --- automatic labels ----------------------------------------------------------------------------
@@ -149,24 +216,33 @@ def write_cfar_submission(context: RunContext, step_dir: Path, scheduler: str | 
 # --- pretraining ---------------------------------------------------------------------------------
 
 
-def pretrain_seed(context: RunContext, auto_dir: Path, validation_dir: Path | None, row: RowSeed, out_dir: Path) -> None:
-    """One seed of one CNN's pretraining on the training split's automatic labels (``config.pretrain``).
+@dataclass(frozen=True)
+class AutoLabelled:
+    """A step's automatic labels: its directory and the scenes it labelled."""
 
-    The checkpoint is the epoch of least loss on the validation split's automatic labels, or without
-    validation scenes on the last :data:`~zendar_baselines.bench.steps.HOLD_OUT_FRACTION` of each
-    training scene's frames, held out. ``checkpoint.json`` and ``curves.json`` as a full run's.
+    directory: Path
+    scene_ids: list[str]
+
+
+def pretrain_seed(context: RunContext, training: AutoLabelled, validation_labels: AutoLabelled | None, row: RowSeed,
+                  out_dir: Path) -> None:
+    """One seed of one CNN's pretraining on the training scenes' automatic labels (``config.pretrain``).
+
+    The checkpoint is the epoch of least loss on the validation scenes' automatic labels, or without
+    them on the last :data:`~zendar_baselines.bench.steps.HOLD_OUT_FRACTION` of each training scene's
+    frames, held out. ``checkpoint.json`` and ``curves.json`` as a full run's.
     """
     from zendar_baselines.bench.steps import HOLD_OUT_FRACTION, STORE_DIR, _every_kth, _frames, write_training_records
     from zendar_baselines.cnn.models import build_model, parameter_count
     from zendar_baselines.cnn.training import hold_out_tail, seed_everything, train
 
     config, window = context.config, context.config.window
-    train_ids = context.dataset.scene_ids("train")
-    everything = _frames(context, train_ids, auto_dir / STORE_DIR)
+    train_ids = training.scene_ids
+    everything = _frames(context, train_ids, training.directory / STORE_DIR)
     in_channels = everything.datasets[0].in_channels
-    if validation_dir is not None:
-        val_ids = context.dataset.scene_ids("val")
-        validation = _every_kth(_frames(context, val_ids, validation_dir / STORE_DIR), window)
+    if validation_labels is not None:
+        val_ids = validation_labels.scene_ids
+        validation = _every_kth(_frames(context, val_ids, validation_labels.directory / STORE_DIR), window)
         record = {"source": "val split, automatic labels", "scenes": val_ids, "window_stride": window,
                   "n_samples": len(validation)}
     else:
@@ -199,42 +275,51 @@ def run_unlabelled_bench(context: RunContext, seeds: int, scheduler: str | None 
     base_inputs = context.step_inputs()
     rows: list[dict[str, Any]] = []
     statistics = None
+    usable_test, left_out_test = usable_scenes(dataset, test_ids, CFAR_STEP)
+    usable_train, left_out_train = usable_scenes(dataset, train_ids, TRAIN_STEP)
+    usable_val, left_out_val = usable_scenes(dataset, val_ids, VAL_STEP)
 
-    if test_ids:
+    if usable_test:
+        # A submission predicts every test frame: those of left-out scenes and radars have no detections.
         cfar_dir, _, _ = run.step("rows/cfar", base_inputs, lambda d: write_cfar_submission(context, d, scheduler))
         n_frames = len(read_json(cfar_dir / PREDICTIONS_FILE)["results"])
         rows.append(_row("cfar", False, False, done=f"predictions of the {n_frames} test frames",
                          predictions=f"rows/cfar/{PREDICTIONS_FILE}", skipped="scoring", reason=NO_LABELS))
     else:
-        rows.append(_row("cfar", False, False, skipped="predictions and scoring", reason="split 'test' has no scenes"))
+        reason = _all_left_out("test", left_out_test) if test_ids else "split 'test' has no scenes"
+        rows.append(_row("cfar", False, False, skipped="predictions and scoring", reason=reason))
 
-    auto_dir = validation_dir = None
-    if train_ids:
-        auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "scenes": train_ids},
-                                         lambda d: write_auto_labels_with_statistics(dataset, train_ids, d, scheduler))
+    training = validation_labels = None
+    if usable_train:
+        auto_dir, auto_key, _ = run.step("autolabels", {**base_inputs, "scenes": usable_train},
+                                         lambda d: write_auto_labels_with_statistics(dataset, usable_train, d, scheduler))
+        training = AutoLabelled(auto_dir, usable_train)
         statistics = read_json(auto_dir / STATISTICS_FILE)
         say("[autolabels] statistics of the training split's automatic labels:\n" + markdown_statistics(statistics))
         validation_key = None
-        if val_ids:
+        if usable_val:
             validation_dir, validation_key, _ = run.step(
-                "autolabels_val", {**base_inputs, "scenes": val_ids},
-                lambda d: write_auto_labels_with_statistics(dataset, val_ids, d, scheduler))
+                "autolabels_val", {**base_inputs, "scenes": usable_val},
+                lambda d: write_auto_labels_with_statistics(dataset, usable_val, d, scheduler))
+            validation_labels = AutoLabelled(validation_dir, usable_val)
     for model_name in config.models:
         rows.append(_row(f"{model_name}-supervised", False, True, skipped="training and scoring",
                          reason=f"{NO_LABELS} to train on"))
         key = RowSeed(model_name, True, 0).row_key
-        if auto_dir is None:
-            rows.append(_row(key, True, True, skipped="pretraining, fine-tuning and scoring", reason="split 'train' has no scenes"))
+        if training is None:
+            reason = _all_left_out("train", left_out_train) if train_ids else "split 'train' has no scenes"
+            rows.append(_row(key, True, True, skipped="pretraining, fine-tuning and scoring", reason=reason))
             continue
         for seed in range(seeds):
             row = RowSeed(model_name, True, seed)
             inputs = {**base_inputs, "autolabels": auto_key, "validation": validation_key, "model": model_name, "seed": seed}
             run.step(f"rows/{key}/seed-{seed}", inputs,
-                     lambda d, r=row: pretrain_seed(context, auto_dir, validation_dir, r, d))
+                     lambda d, r=row: pretrain_seed(context, training, validation_labels, r, d))
         rows.append(_row(key, True, True, done=f"pretraining on the automatic labels, {seeds} seed(s)",
                          checkpoints=[f"rows/{key}/seed-{seed}/checkpoint.json" for seed in range(seeds)],
                          skipped="fine-tuning and scoring", reason=NO_LABELS))
-    return _write_outputs(context, seeds, rows, statistics, time.monotonic() - started)
+    left_out = left_out_test + left_out_train + left_out_val
+    return _write_outputs(context, seeds, rows, left_out, statistics, time.monotonic() - started)
 
 
 def _row(key: str, unsupervised: bool, supervised: bool, *, skipped: str, reason: str, done: str | None = None,
@@ -245,8 +330,8 @@ def _row(key: str, unsupervised: bool, supervised: bool, *, skipped: str, reason
             "done": done, "skipped": skipped, "reason": reason, **files}
 
 
-def _write_outputs(context: RunContext, seeds: int, rows: list[dict[str, Any]], statistics: dict[str, Any] | None,
-                   elapsed_s: float) -> dict[str, Any]:
+def _write_outputs(context: RunContext, seeds: int, rows: list[dict[str, Any]], left_out: list[LeftOut],
+                   statistics: dict[str, Any] | None, elapsed_s: float) -> dict[str, Any]:
     config, out = context.config, context.run_path
     claims_reason = f"they compare the rows' scores, and no row is scored: {NO_LABELS}"
     results = {
@@ -260,7 +345,7 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[dict[str, Any]], 
         "dataset": {"root": str(context.root), "fingerprint": context.fingerprint},
         "rows": rows,
         "skipped": [{"what": f"{row['key']}: {row['skipped']}", "reason": row["reason"]} for row in rows]
-                   + [{"what": "the paper's claims", "reason": claims_reason}],
+                   + [{"what": "the paper's claims", "reason": claims_reason}] + [part.to_json() for part in left_out],
         "claims": {"skipped": True, "reason": claims_reason},
         "submission": {"predictions": f"rows/cfar/{PREDICTIONS_FILE}", "add_to_meta": list(SUBMITTER_FIELDS)}
                       if any(row.get("predictions") for row in rows) else None,
@@ -279,6 +364,9 @@ def _write_outputs(context: RunContext, seeds: int, rows: list[dict[str, Any]], 
                 done += f" ({', '.join(row[name]) if isinstance(row[name], list) else row[name]})"
         lines.append(f"| {row['method']}{kind} | {done} | {row['skipped']} | {row['reason']} |")
     lines.append(f"| the paper's claims | - | all | {claims_reason} |")
+    if left_out:
+        lines += ["", "### Scenes and radars left out", "", "| step | left out | why |", "|---|---|---|"]
+        lines += [f"| {part.step} | {part.where} | {part.reason} |" for part in left_out]
     if results["submission"] is not None:
         lines += ["", f"`rows/cfar/{PREDICTIONS_FILE}` is a leaderboard submission once `meta.team` and `meta.contact` "
                       "are added (docs/leaderboard.md, \"Submissions\")."]

@@ -3,6 +3,7 @@
 CA-CFAR peaks of each radar's latest cube at or before a SAR frame (the loader's rule, as in
 ``examples/end_to_end.py``), then the shared chain (:mod:`zendar_dataset.detection`):
 DOA, the SAR static-scene test, DBSCAN clusters, one scored detection per cluster of dynamic points.
+A radar whose range-Doppler maps are smaller than the CFAR window (:func:`cfar_misfits`) has no peaks.
 """
 
 from __future__ import annotations
@@ -11,12 +12,23 @@ import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from tqdm import tqdm
 
-from zendar_dataset.detection import ChainParams, FramePoints, cfar_cells, frame_cube_points, frame_detections, to_frame
+from zendar_dataset.detection import (
+    ChainParams,
+    FramePoints,
+    RadarCells,
+    cfar_cells,
+    frame_cube_points,
+    frame_detections,
+    frame_timestamps,
+    to_frame,
+)
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format import frame_id
 from zendar_dataset.format.reader import DatasetIndex, SceneReader, open_dataset
+from zendar_dataset.radar.cfar import DEFAULT_GUARD, DEFAULT_TRAIN, window_misfit
 
 from zendar_baselines.fingerprints import dataset_on_worker, task_root
 
@@ -38,11 +50,45 @@ class CfarSceneTask:
     params: ChainParams
 
 
+def cfar_misfits(reader: SceneReader) -> dict[str, str]:
+    """The radars of one open scene whose range-Doppler maps the chain's CFAR window does not fit.
+
+    The chain's CFAR (:func:`zendar_dataset.detection.cfar_map`) runs
+    :func:`~zendar_dataset.radar.cfar.cfar_2d` with its default window, which needs at least 11 range
+    and 13 Doppler cells.
+
+    Returns
+    -------
+    dict
+        Radar -> why, naming the maps' shape and the window; empty when every radar's maps fit.
+    """
+    misfits = {}
+    for radar in reader.sensors("radar"):
+        n_range, n_doppler = reader.array(f"radar/{radar}/cube").shape[1:3]
+        misfit = window_misfit((n_range, n_doppler))
+        if misfit is not None:
+            misfits[radar] = (f"range-Doppler maps of {n_range} range x {n_doppler} Doppler cells, smaller than "
+                              f"the CFAR window ({DEFAULT_GUARD[0]} guard and {DEFAULT_TRAIN[0]} training range cells, "
+                              f"{DEFAULT_GUARD[1]} guard and {DEFAULT_TRAIN[1]} training Doppler cells on each side): {misfit}")
+    return misfits
+
+
 def scene_predictions(reader: SceneReader, params: ChainParams) -> Detections:
-    """Frame id -> the CFAR baseline's detections, for every SAR frame of one open scene."""
+    """Frame id -> the CFAR baseline's detections, for every SAR frame of one open scene; the radars
+    of :func:`cfar_misfits` have no CFAR peaks, and a scene with no other radar has no detections (the
+    chain does not run on it)."""
+    misfits = cfar_misfits(reader)
+    if len(misfits) == len(reader.sensors("radar")):
+        return {frame_id(reader.scene_id, frame_ns): [] for frame_ns in frame_timestamps(reader).tolist()}
     poses = reader.ego_poses()
+
+    def cells_of(radar: str, k: int, cube: np.ndarray) -> RadarCells:
+        if radar in misfits:
+            return RadarCells(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        return cfar_cells(cube, params)
+
     results: Detections = {}
-    for frame_ns, found in frame_cube_points(reader, lambda radar, k, cube: cfar_cells(cube, params), params, poses=poses):
+    for frame_ns, found in frame_cube_points(reader, cells_of, params, poses=poses):
         points = FramePoints.concatenate([to_frame(cube, poses, frame_ns) for cube in found])
         results[frame_id(reader.scene_id, frame_ns)] = frame_detections(points, params)
     return results

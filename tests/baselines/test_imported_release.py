@@ -29,9 +29,10 @@ def _quat(quat, wxyz) -> None:
     quat.w, quat.x, quat.y, quat.z = (float(v) for v in wxyz)
 
 
-def write_release(scene) -> None:
+def write_release(scene, cube_shape=(R, D, A)) -> None:
     """One 1.2 s scene written with the SDK's 2020 definitions: both radars' SAR images and detections,
-    the tracklog, and the left radar's range-Doppler cubes (noise and one approaching target)."""
+    the tracklog and, unless ``cube_shape`` is None, the left radar's range-Doppler cubes of that shape
+    (noise and, in the tiny profile's, one approaching target)."""
     m = sdk("2020")
     rng = np.random.default_rng(5)
     for serial, side in fx.SERIALS.items():
@@ -64,17 +65,25 @@ def write_release(scene) -> None:
         _vec(pose.position, fx.enu_to_ecef(p_enu))
         poses.append(pose)
     write_recording(scene / "vn200.pbs", poses)
+    if cube_shape is not None:
+        _write_cubes(scene, m, rng, cube_shape)
+
+
+def _write_cubes(scene, m, rng, shape) -> None:
+    n_range, n_doppler, n_rx = shape
     wavelength = 0.0039
-    model = m["RangeDopplerImageModel"](num_rx=A, wavelength=wavelength)
-    model.range_axis_params.start, model.range_axis_params.delta, model.range_axis_params.count = 0.0, 0.6, R
-    model.doppler_axis_params.start, model.doppler_axis_params.delta, model.doppler_axis_params.count = -D / 2 * 1.25, 1.25, D
-    for a in range(A):
+    model = m["RangeDopplerImageModel"](num_rx=n_rx, wavelength=wavelength)
+    model.range_axis_params.start, model.range_axis_params.delta, model.range_axis_params.count = 0.0, 0.6, n_range
+    model.doppler_axis_params.start, model.doppler_axis_params.delta = -n_doppler / 2 * 1.25, 1.25
+    model.doppler_axis_params.count = n_doppler
+    for a in range(n_rx):
         _vec(model.rx_positions.add(), (a * wavelength / 2, 0.0, 0.0))  # the release's radar frame: x left
     write_recording(scene / "range_Doppler" / "left_model.pbs", [model])
     frames = []
-    for k, t in enumerate(TIMES_S):
-        cube = (rng.normal(size=(R, D, A)) + 1j * rng.normal(size=(R, D, A))).astype("<c8")
-        cube[17, 8, :] += 300.0  # 10.2 m straight out (azimuth 0), inside the SAR image; -10 m/s
+    for t in TIMES_S:
+        cube = (rng.normal(size=shape) + 1j * rng.normal(size=shape)).astype("<c8")
+        if shape == (R, D, A):
+            cube[17, 8, :] += 300.0  # 10.2 m straight out (azimuth 0), inside the SAR image; -10 m/s
         frames.append(m["RangeDopplerFrame"](timestamp=fx.T0_S + float(t) - 0.01, data=cube.tobytes()))
     write_recording(scene / "range_Doppler" / "left_rd.pbs", frames)
 

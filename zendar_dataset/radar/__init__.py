@@ -5,7 +5,7 @@ chain pays (:mod:`zendar_dataset.radar.batched_chain`, imported on its own so th
 importing this package does not import torch).
 """
 
-from zendar_dataset.radar.cfar import CfarDetections, CfarResult, cfar_2d, detect
+from zendar_dataset.radar.cfar import CfarDetections, CfarResult, cfar_2d, detect, window_misfit
 from zendar_dataset.radar.doa import detections_to_points, estimate_azimuth, steering_vectors
 from zendar_dataset.radar.fmcw import CALIBRATION_KEYS, SPEED_OF_LIGHT_MPS, FmcwParams, beat_signal_exact
 from zendar_dataset.radar.range_doppler import range_axis_m, range_doppler, range_profiles, velocity_axis_mps
@@ -26,4 +26,5 @@ __all__ = [
     "range_profiles",
     "steering_vectors",
     "velocity_axis_mps",
+    "window_misfit",
 ]

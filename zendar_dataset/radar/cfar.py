@@ -57,6 +57,9 @@ import scipy.optimize
 
 METHODS = ("ca", "so", "go", "os")
 EDGES = ("wrap-doppler", "wrap", "valid-range")
+#: :func:`cfar_2d`'s guard and training cells on each side of the CUT, (range, Doppler), unless given.
+DEFAULT_GUARD = (2, 2)
+DEFAULT_TRAIN = (8, 4)
 
 
 @dataclass(frozen=True)
@@ -537,12 +540,58 @@ def _pair(value: Any, name: str) -> tuple[int, int]:
     return a, b
 
 
+def _window(guard: tuple[int, int], train: tuple[int, int]) -> CfarWindow:
+    gr, gd = _pair(guard, "guard")
+    tr, td = _pair(train, "train")
+    return CfarWindow(gr, gd, tr, td)
+
+
+def _misfit(window: CfarWindow, n_r: int, n_d: int, edge: str) -> str | None:
+    if 2 * window.half_doppler + 1 > n_d:
+        return f"the window spans {2 * window.half_doppler + 1} Doppler cells but the map has {n_d}"
+    if (edge == "wrap" and 2 * window.half_range + 1 > n_r) or window.half_range > n_r - 1:
+        return f"the window spans {2 * window.half_range + 1} range cells but the map has {n_r}"
+    return None
+
+
+def window_misfit(
+    map_shape: tuple[int, ...],
+    *,
+    guard: tuple[int, int] = DEFAULT_GUARD,
+    train: tuple[int, int] = DEFAULT_TRAIN,
+    edge: str = "wrap-doppler",
+) -> str | None:
+    """Why :func:`cfar_2d`'s window does not fit maps of a shape, or None when it does.
+
+    A caller checks with it first where a map too small for the window is an expected case (a
+    recording of few range or Doppler cells) rather than a bug.
+
+    Parameters
+    ----------
+    map_shape : tuple of int
+        ``[..., R, D]`` the maps' shape.
+    guard, train, edge
+        As :func:`cfar_2d`.
+
+    Returns
+    -------
+    str or None
+        The message :func:`cfar_2d` raises its ValueError with, e.g. ``"the window spans 13 Doppler
+        cells but the map has 8"``.
+    """
+    if edge not in EDGES:
+        raise ValueError(f"edge must be one of {EDGES}, got {edge!r}")
+    if len(map_shape) < 2:
+        raise ValueError(f"map_shape must be [..., R, D], got {map_shape}")
+    return _misfit(_window(guard, train), int(map_shape[-2]), int(map_shape[-1]), edge)
+
+
 def cfar_2d(
     power: np.ndarray,
     *,
     method: str = "ca",
-    guard: tuple[int, int] = (2, 2),
-    train: tuple[int, int] = (8, 4),
+    guard: tuple[int, int] = DEFAULT_GUARD,
+    train: tuple[int, int] = DEFAULT_TRAIN,
     pfa: float = 1e-4,
     os_rank: int | None = None,
     edge: str = "wrap-doppler",
@@ -574,17 +623,15 @@ def cfar_2d(
         raise ValueError(f"edge must be one of {EDGES}, got {edge!r}")
     if not 0.0 < float(pfa) < 1.0:
         raise ValueError(f"pfa must lie in (0, 1), got {pfa!r}")
-    gr, gd = _pair(guard, "guard")
-    tr, td = _pair(train, "train")
-    window = CfarWindow(gr, gd, tr, td)
+    window = _window(guard, train)
+    gr, gd = window.guard_range, window.guard_doppler
     power = np.asarray(power)
     if power.ndim < 2 or np.iscomplexobj(power):
         raise ValueError(f"power must be a real [..., R, D] array, got {power.dtype} {power.shape}")
     n_r, n_d = power.shape[-2:]
-    if 2 * window.half_doppler + 1 > n_d:
-        raise ValueError(f"the window spans {2 * window.half_doppler + 1} Doppler cells but the map has {n_d}")
-    if (edge == "wrap" and 2 * window.half_range + 1 > n_r) or window.half_range > n_r - 1:
-        raise ValueError(f"the window spans {2 * window.half_range + 1} range cells but the map has {n_r}")
+    misfit = _misfit(window, n_r, n_d, edge)
+    if misfit is not None:
+        raise ValueError(misfit)
     n = window.n_train
     if method == "os":
         rank = default_os_rank(n) if os_rank is None else int(os_rank)
