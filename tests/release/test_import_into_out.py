@@ -196,3 +196,29 @@ def test_a_truncated_stream_does_not_hide_the_sides_disagreement(tmp_path, capsy
     assert status == 2
     assert "byte offset" in err and "left and right are not guessed" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("foreign", ["notes.txt", "release_import.json"])
+def test_an_out_holding_files_of_its_own_is_refused_and_left_as_it_is(tmp_path, capsys, foreign):
+    src = tmp_path / "release"
+    _tracklog_scene(src / "2020-02-21_0900" / "001", T0_S)
+    out = tmp_path / "out"
+    if foreign == "release_import.json":
+        (out / "scenes").mkdir(parents=True)  # an earlier import's folder, with somebody's file in it
+    else:
+        out.mkdir()
+    (out / foreign).write_text("my precious notes")
+    status, _, err = _import(capsys, src, out)
+    assert status == 2 and foreign in err
+    assert (out / foreign).read_text() == "my precious notes"
+    assert not (out / "dataset.json").exists()
+
+
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
+    src = tmp_path / "release"
+    _tracklog_scene(src / "2020-02-21_0900" / "001", T0_S)
+    out = tmp_path / "out"
+    out.write_text("mine")
+    status, _, err = _import(capsys, src, out)
+    assert status == 2 and "OUT is a file" in err
+    assert out.read_text() == "mine"

@@ -507,6 +507,31 @@ class _EarlierDataset:
         return None
 
 
+def _check_out(out: pathlib.Path) -> None:
+    """OUT is new, an empty folder, or a dataset an import can resume or add to (``dataset.json`` or
+    ``scenes/`` in it); its ``release_import.json``, if any, is an earlier import's summary (so that
+    merging into it overwrites nothing of the user's)."""
+    if out.exists() and not out.is_dir():
+        raise ZendarError(f"{out}: OUT is a file; give a new or empty folder, or a dataset to add to")
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if not (out / DATASET_JSON).is_file() and not (out / "scenes").is_dir():
+        found = sorted(p.name for p in out.iterdir())
+        raise ZendarError(
+            f"{out}: OUT holds files that are not a dataset ({', '.join(found[:5])}{' …' if len(found) > 5 else ''}); "
+            "give a new or empty folder, or a dataset to add to"
+        )
+    summary = out / SUMMARY_JSON
+    if summary.exists():
+        try:
+            document = json.loads(summary.read_text(encoding="utf-8"))
+            ours = isinstance(document, dict) and isinstance(document.get("scenes"), list) and "source" in document
+        except (ValueError, UnicodeDecodeError):
+            ours = False
+        if not ours:
+            raise ZendarError(f"{summary}: expected an earlier import's summary, found another file; move it out of OUT")
+
+
 def _named_serials(files: list[pathlib.Path]) -> set[str]:
     """Radar serials a scene's file names give (``<serial>_images.pbs``, ``<serial>_points.pbs``)."""
     return {serial for path in files for suffix in ("_images", "_points") if (serial := _prefix(path, suffix))}
@@ -518,11 +543,8 @@ def _merged_summary(out: pathlib.Path, summary: ImportSummary) -> dict:
     instead of "already imported", and the scenes of earlier runs not in this one are kept."""
     document = summary.to_json()
     path = out / SUMMARY_JSON
-    try:
-        earlier = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}
-        before = {s["scene_id"]: s for s in earlier.get("scenes", []) if isinstance(s, dict) and isinstance(s.get("scene_id"), str)}
-    except (ValueError, TypeError, AttributeError):
-        before = {}  # an unreadable summary of our own: this run's is all there is to write
+    earlier = json.loads(path.read_text(encoding="utf-8")) if path.exists() else {}  # checked by _check_out
+    before = {s["scene_id"]: s for s in earlier.get("scenes", []) if isinstance(s, dict) and isinstance(s.get("scene_id"), str)}
     merged = []
     for scene in document["scenes"]:
         prior = before.pop(scene["scene_id"], None)
@@ -613,6 +635,7 @@ def import_release(
     resolved_src, resolved_out = src_path.resolve(), out_path.resolve()
     if resolved_out == resolved_src or (src_path.is_dir() and resolved_src in resolved_out.parents):
         raise ZendarError(f"{out_path}: the output must lie outside the release folder {src_path} (it is never modified)")
+    _check_out(out_path)
     scenes = find_scenes(src_path)
     if not scenes:
         raise ZendarError(f"{src_path}: no stream files (*.pbs, *.pbs.gz, *.pb) found")
