@@ -45,3 +45,20 @@ def test_ctrl_c_while_a_console_script_starts_exits_130(script):
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, (process.returncode, stderr)
     assert "Traceback" not in stderr and stderr.strip().splitlines()[-1] == "interrupted", stderr
+
+
+def test_the_console_scripts_are_the_ones_the_package_knows():
+    import zendar_dataset
+
+    assert sorted(zendar_dataset.CONSOLE_SCRIPTS) == sorted(SCRIPTS)
+
+
+@pytest.mark.parametrize("argv0, handler", [("/usr/bin/zendar-eval", "_exit_at_once"), ("zendar-leaderboard.exe", "_exit_at_once"),
+                                            ("/usr/bin/python3", "default_int_handler")])
+def test_run_as_a_console_script_the_package_import_installs_the_start_up_handler(argv0, handler):
+    # Before the command's module has imported anything else: the window in which Ctrl-C printed a traceback.
+    code = (f"import signal, sys; sys.argv[0] = {argv0!r}; import zendar_dataset; "
+            "print(signal.getsignal(signal.SIGINT).__name__)")
+    completed = _run(code)
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.strip() == handler
