@@ -60,6 +60,24 @@ def test_a_simulated_point_target_lands_where_it_was_with_its_radial_velocity():
     assert np.isnan(points.sar_db).all() and not points.dynamic.any()
 
 
+def test_an_array_that_is_not_symmetric_places_a_point_target_too():
+    # An imported radar's antennas need not be symmetric about their centre (no forward-backward
+    # averaging then); the target still lands where it was.
+    params = radar_params(n_samples=128)
+    rx = params.rx_positions_m.copy()
+    rx[:, 1] = np.array([0.0, 0.5, 1.5, 1.8]) * params.wavelength_m
+    params = dataclasses.replace(params, rx_positions_m=rx)
+    calibration = radar_calibration(params, MOUNT_YAW_RAD, MOUNT_M)
+    range_m, azimuth_rad = 15.0, math.radians(-12.0)
+    direction = np.array([math.cos(azimuth_rad), math.sin(azimuth_rad), 0.0])
+    cube = simulate_cube(params, range_m * direction, 0.0 * direction, [1.0], noise=1e-2)
+    cells = cfar_cells(cube)
+    strongest = int(np.argmax(cells.score))
+    points = cube_points(cube, cells, T0_NS, calibration, parked_poses(), sar_frames())
+    expected_ego = SE3.from_wxyz(calibration["rotation_wxyz"], MOUNT_M).transform_points((range_m * direction)[None])[0]
+    assert np.linalg.norm(points.points_ego[strongest] - expected_ego) < math.hypot(params.range_bin_m / 2, range_m * math.radians(0.5))
+
+
 def _cube_points(poses, points_ego, residual_mps, radar_ego=(0.0, 0.0, 0.0)) -> CubePoints:
     n = len(points_ego)
     return CubePoints(T0_NS, poses.ecef_T_ego(T0_NS), np.asarray(radar_ego, float), np.zeros(n, np.int64), np.zeros(n, np.int64),

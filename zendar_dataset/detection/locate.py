@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from zendar_dataset.geometry.frames import EgoPoses, ego_T_sensor
-from zendar_dataset.radar import FmcwParams, detections_to_points, estimate_azimuth
+from zendar_dataset.radar import FmcwParams, detections_to_points, estimate_azimuth, is_centro_symmetric
 from zendar_dataset.radar.cfar import cell_spacing
 
 VELOCITY_HALF_STEP_NS = 50_000_000  # central difference over +-50 ms of tracklog
@@ -60,7 +60,9 @@ def locate_cells(
     range_m = range_bin * float(range_bin_m)
     velocity_mps = (doppler_bin - cube.shape[1] // 2) * float(doppler_bin_mps)
     snapshots = cube[range_bin, doppler_bin]  # [N, A]
-    azimuth_rad = estimate_azimuth(snapshots, params.rx_positions_m, params.wavelength_m)
+    # Forward-backward averaging where the array allows it: an imported radar's need not be symmetric.
+    azimuth_rad = estimate_azimuth(snapshots, params.rx_positions_m, params.wavelength_m,
+                                   forward_backward=is_centro_symmetric(params.rx_positions_m))
     ego_T_radar = ego_T_sensor(calibration)
     points_ego = detections_to_points(range_m, azimuth_rad, ego_T_radar)
 

@@ -6,7 +6,7 @@ importing this package does not import torch).
 """
 
 from zendar_dataset.radar.cfar import CfarDetections, CfarResult, cfar_2d, detect, window_misfit
-from zendar_dataset.radar.doa import detections_to_points, estimate_azimuth, steering_vectors
+from zendar_dataset.radar.doa import detections_to_points, estimate_azimuth, is_centro_symmetric, steering_vectors
 from zendar_dataset.radar.fmcw import CALIBRATION_KEYS, SPEED_OF_LIGHT_MPS, FmcwParams, beat_signal_exact
 from zendar_dataset.radar.range_doppler import range_axis_m, range_doppler, range_profiles, velocity_axis_mps
 
@@ -21,6 +21,7 @@ __all__ = [
     "detect",
     "detections_to_points",
     "estimate_azimuth",
+    "is_centro_symmetric",
     "range_axis_m",
     "range_doppler",
     "range_profiles",

@@ -68,6 +68,12 @@ def steering_vectors(azimuth_rad: np.ndarray, rx_positions_m: np.ndarray, wavele
     return np.exp(-2j * np.pi * path / float(wavelength_m))
 
 
+def is_centro_symmetric(rx_positions_m: np.ndarray) -> bool:
+    """Whether ``[A, 3]`` antenna positions (metres) are symmetric about their centre, which
+    forward-backward averaging needs (:func:`estimate_azimuth`)."""
+    return _array_layout(np.ascontiguousarray(rx_positions_m, dtype=np.float64).tobytes())[1]
+
+
 @functools.lru_cache(maxsize=16)
 def _array_layout(rx_bytes: bytes) -> tuple[bool, bool]:
     """(uniform linear, centro-symmetric) of ``[A, 3]`` positions given as float64 bytes."""
