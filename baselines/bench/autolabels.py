@@ -11,6 +11,7 @@ the order the tasks finish; the masks do not depend on where or in which order t
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,18 +24,21 @@ from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.cluster import DaskCluster, refuse_url_output
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import DatasetIndex, SceneReader
+from zendar_dataset.output_location import refuse_output_inside
 from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
+from zendar_dataset.temporary_files import owner_pid
 
 from zendar_baselines.bench.steps import STORE_DIR, mask_parameters
 from zendar_baselines.classical.cfar_baseline import cfar_misfits
 from zendar_baselines.code_version import code_version
-from zendar_baselines.fingerprints import dataset_index, dataset_on_worker, task_root
+from zendar_baselines.fingerprints import dataset_index, dataset_location, dataset_on_worker, task_root
 from zendar_baselines.labels.mask_store import MaskStore, RadarMasks, write_scene_file
 from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.labels.quality import QUALITY_REFERENCE, combine_quality, format_quality, mask_quality
 
 QUALITY_FILE = "quality.json"
+_FOREIGN_SHOWN = 5
 
 
 def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
@@ -199,9 +203,64 @@ def write_auto_labels(dataset: DatasetIndex | str | os.PathLike, scene_ids: list
     return document
 
 
+def refuse_foreign_out(out_dir: Path, dataset: DatasetIndex | str | os.PathLike) -> None:
+    """Refuse an ``--out`` of ``zendar-bench autolabels`` that is not new, empty, or its own output.
+
+    Its own output is :data:`STORE_DIR` (whose content :meth:`MaskStore.create` judges), a
+    :data:`QUALITY_FILE` it wrote and temporaries a killed run left; anything else is the user's
+    and is never replaced, so a re-run into its own ``--out`` still resumes.
+
+    Parameters
+    ----------
+    out_dir
+        The ``--out`` directory.
+    dataset
+        The dataset labelled (its root or the dataset opened).
+
+    Raises
+    ------
+    ZendarError
+        When ``out_dir`` is inside the dataset, is not a directory, or holds files the command did not
+        write (naming them); nothing is touched.
+    """
+    # First, so that an --out at or inside the dataset is named as such rather than by its files.
+    refuse_output_inside(out_dir, datasets=(dataset_location(dataset),), what="--out")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ZendarError(f"--out {out_dir}: exists and is not a directory")
+    if not out_dir.is_dir():
+        return
+    foreign = sorted(entry.name for entry in out_dir.iterdir() if not _own_output(entry))
+    if foreign:
+        shown = ", ".join(foreign[:_FOREIGN_SHOWN]) + (f" and {len(foreign) - _FOREIGN_SHOWN} more"
+                                                       if len(foreign) > _FOREIGN_SHOWN else "")
+        raise ZendarError(f"--out {out_dir} holds files that zendar-bench autolabels did not write ({shown}); choose "
+                          "a new or empty directory, or one it wrote (nothing was changed)")
+
+
+def _own_output(entry: Path) -> bool:
+    """Whether an entry of ``--out`` may be one :func:`write_auto_labels` wrote."""
+    if entry.name == STORE_DIR:
+        return True
+    if entry.name == QUALITY_FILE:
+        return _is_quality_document(entry)
+    return owner_pid(entry) is not None
+
+
+def _is_quality_document(path: Path) -> bool:
+    """Whether ``path`` holds the document :func:`write_auto_labels` writes: exactly its two keys,
+    ``quality`` and the text ``table`` (it carries no format marker, so its shape is the proof)."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return (isinstance(document, dict) and set(document) == {"quality", "table"}
+            and isinstance(document["quality"], dict) and isinstance(document["table"], str))
+
+
 def _remove_orphans(cluster: DaskCluster, directory: Path) -> None:
     with contextlib.suppress(OSError):
         cluster.remove_orphaned_temporaries(directory)
 
 
-__all__ = ["AutoLabelTask", "LabelledScene", "label_scene", "labelled_radars", "write_auto_labels"]
+__all__ = ["AutoLabelTask", "LabelledScene", "label_scene", "labelled_radars", "refuse_foreign_out",
+           "write_auto_labels"]

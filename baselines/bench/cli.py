@@ -108,8 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
         "band where the scenes have labels. Re-running resumes.",
     )
     autolabels.add_argument("root", help="dataset root")
-    autolabels.add_argument("--out", required=True, help="store directory (new, empty, or a store of this dataset); "
-                            "never inside ROOT")
+    autolabels.add_argument("--out", required=True, help="output directory: new, empty, or one this command wrote for this "
+                            "dataset (its store/ and quality.json; anything else in it is refused); never inside ROOT")
     autolabels.add_argument("--split", default="train", help="split to label (default: train)")
     autolabels.add_argument("--no-quality", action="store_true",
                             help="skip the comparison with the manual labels (needed for scenes without labels)")
@@ -191,9 +191,10 @@ def _verify(args: argparse.Namespace) -> int:
 
 def _autolabels(args: argparse.Namespace) -> int:
     from zendar_dataset.format.reader import open_dataset
-    from zendar_baselines.bench.autolabels import write_auto_labels
+    from zendar_baselines.bench.autolabels import refuse_foreign_out, write_auto_labels
     from zendar_baselines.labels.masks import MaskParams
 
+    refuse_foreign_out(Path(args.out), args.root)  # before the dataset is read or anything written
     index = open_dataset(args.root)
     scene_ids = index.scene_ids(args.split)
     if not scene_ids:

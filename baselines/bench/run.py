@@ -36,6 +36,7 @@ from zendar_dataset.cluster import connected
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.eval.report import read_metrics
 from zendar_dataset.format.reader import DatasetIndex, open_dataset
+from zendar_dataset.output_location import refuse_output_inside
 from zendar_dataset.worker_pool import run_in_workers, usable_cpus
 
 from zendar_baselines.bench import ranks
@@ -102,6 +103,11 @@ def say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
+def data_root(options: BenchOptions) -> Path:
+    """The dataset's root: ``--data``, or the cache directory of the configuration's simulated one."""
+    return options.data if options.data is not None else default_data_dir(options.config)
+
+
 def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex, bool]:
     """The dataset to run on, it opened, and whether it has manual labels: simulated (resumably) when
     absent; checked to have labels where needed, unless no scene has any (:mod:`unlabelled`)."""
@@ -110,7 +116,7 @@ def ensure_dataset(options: BenchOptions) -> tuple[Path, DatasetIndex, bool]:
     from zendar_baselines.bench.unlabelled import has_no_labels
 
     config = options.config
-    root = options.data if options.data is not None else default_data_dir(config)
+    root = data_root(options)
     if not (root / "dataset.json").is_file():
         # The simulator resumes its own interrupted run there and refuses a directory of other files.
         say(f"[data] simulating the {config.sim_profile} dataset ({config.n_scenes} scenes) into {root}")
@@ -151,7 +157,16 @@ def run_bench(options: BenchOptions) -> dict[str, Any]:
 
     Under torchrun, rank 0 does so and the other ranks train each CNN seed with it, write nothing and
     return an empty dict (:mod:`zendar_baselines.bench.ranks`).
+
+    Raises
+    ------
+    ZendarError
+        Before anything is written: ``options.out`` is inside the dataset (README: no command writes
+        into a dataset it reads), or the batch sizes do not divide over torchrun's ranks.
     """
+    # Before anything is simulated or written, on every rank alike: links are resolved, so an --out
+    # reaching into the dataset through a symlink is refused too.
+    refuse_output_inside(options.out, datasets=(data_root(options),), what="--out")
     world_size = ranks.current().world_size
     uneven = {phase: getattr(options.config, phase).batch_size for phase in ("pretrain", "finetune", "supervised")
               if getattr(options.config, phase).batch_size % world_size}
