@@ -4,6 +4,7 @@ import itertools
 import json
 import math
 import random
+import warnings
 
 import numpy as np
 import pytest
@@ -158,3 +159,54 @@ def test_one_block_is_named_as_a_block_in_the_table():
     text = format_table(evaluate({"results": results}, {"frames": frames}, bootstrap=10, bootstrap_block_s=5.0))
     assert "over up to 10 5 s time block resamples" in text
     assert "one time block: resampling cannot show any spread" in text and "one scene" not in text
+
+
+def _reference_block_count(scene, stamps, block_s):
+    """Blocks by exact rational arithmetic, one scene at a time (independent of numpy's floats)."""
+    from fractions import Fraction
+
+    block_ns = Fraction(block_s) * NS
+    n = 0
+    for s in set(scene.tolist()):
+        elapsed = [int(t) - int(stamps[scene == s].min()) for t in stamps[scene == s]]
+        k = [e // block_ns if block_ns > 0 else None for e in elapsed]  # Fraction floor division
+        last = max(k)
+        if last > 0 and max(elapsed) - min(e for e, b in zip(elapsed, k) if b == last) < block_ns / 2:
+            k = [last - 1 if b == last else b for b in k]
+        n += len(set(k))
+    return n
+
+
+@pytest.mark.parametrize("block_s", [5e-324, 1e-300, 1e-20, 3e-10, 1e-9, 0.7e-9, 0.013, 0.25, 1.0, 3.0, 1e300])
+def test_blocks_match_an_exact_count_for_any_positive_block(block_s):
+    rng = np.random.default_rng(7)
+    # Two scenes of 10 Hz frames with nanosecond jitter, one with a gap; a third two frames 1 ns apart.
+    t0 = np.arange(40) * NS // 10 + rng.integers(0, 1000, 40) + 10**18
+    t1 = np.r_[np.arange(20), np.arange(50, 70)] * NS // 10 + rng.integers(0, 1000, 40)
+    scene = np.r_[np.zeros(40, int), np.ones(40, int), [2, 2]]
+    stamps = np.r_[t0, t1, [5, 6]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the cast of an infinite block count warned
+        blocks, n = frame_blocks(scene, stamps, block_s)
+    assert n == _reference_block_count(scene, stamps, block_s)
+    assert sorted(set(blocks.tolist())) == list(range(n))
+    if block_s <= 0.5e-9:  # every spacing (1 ns or more) spans two blocks: one unit per frame
+        assert n == len(scene)
+
+
+def test_a_block_far_shorter_than_a_frame_gives_one_unit_per_frame_in_metrics(tmp_path, capsys):
+    frames = {f"s/{k * NS // 10}": [{"x": 10.0, "y": 0.0}] for k in range(10)}
+    results = {f: [{"x": 10.0, "y": 0.0, "score": 0.5}] for f in frames}
+    (tmp_path / "p.json").write_text(json.dumps({"results": results}))
+    (tmp_path / "g.json").write_text(json.dumps({"frames": frames}))
+    args = [str(tmp_path / "p.json"), "--gt", str(tmp_path / "g.json"), "--bootstrap", "10"]
+    assert eval_main(args + ["--bootstrap-block-s", "1e-300", "--out", str(tmp_path / "o")]) == 0
+    assert json.loads((tmp_path / "o" / "metrics.json").read_text())["protocol"]["bootstrap"]["n_units"] == 10
+    assert "RuntimeWarning" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("stamp", ["\u00b2", "\u0663", "9223372036854775808", "1" * 5000])
+def test_time_blocks_refuse_timestamps_that_are_not_int64_ascii_digits(stamp):
+    frame = f"s/{stamp}"
+    with pytest.raises(ZendarError, match="bootstrap over time blocks needs"):
+        evaluate({"results": {frame: []}}, {"frames": {frame: []}}, bootstrap=5, bootstrap_block_s=1.0)

@@ -148,12 +148,17 @@ def frame_blocks(frame_scene: np.ndarray, timestamp_ns: np.ndarray, block_s: flo
     frame_block = np.zeros(len(frame_scene), dtype=np.int64)
     if len(frame_scene) == 0:
         return frame_block, 0
-    block_ns = block_s * 1e9
+    # Timestamps are whole nanoseconds, so any block of half a nanosecond or less puts every
+    # timestamp in a block of its own, none of which can join the (empty) block before it: exactly
+    # what half a nanosecond gives. The floor keeps elapsed / block finite for a block of 1e-300 s.
+    block_ns = max(block_s * 1e9, 0.5)
     n_blocks = 0
     for scene in np.unique(frame_scene):
         in_scene = np.flatnonzero(frame_scene == scene)
         elapsed_ns = timestamp_ns[in_scene] - timestamp_ns[in_scene].min()
-        k = np.floor(elapsed_ns / block_ns).astype(np.int64)
+        # Block numbers stay float64: only their order and equality matter, and a cast to int64
+        # would overflow for spans beyond 2**62 ns at the shortest block.
+        k = np.floor(elapsed_ns / block_ns)
         last = k.max()
         if last > 0 and (elapsed_ns.max() - elapsed_ns[k == last].min()) < 0.5 * block_ns:
             k[k == last] = last - 1

@@ -90,9 +90,12 @@ def load_ground_truth(
     if isinstance(source, (str, os.PathLike)) and Path(source).is_dir():
         return _ground_truth_from_dataset(Path(source), split)
     document, problems = load_document(source, what="ground truth", max_bytes=max_bytes)
-    if problems:
+    if document is None and problems:
         return CheckedInput(None, None, problems)
     checked = read_ground_truth_document(document)
+    if problems:  # keys given twice: the rest of the document is still checked
+        checked.problems[:0] = problems
+        checked.table = None
     if split is not None and checked.split is not None and split != checked.split:
         checked.problems.append(
             f"ground truth file holds split {checked.split!r} but split {split!r} was asked for"
@@ -256,18 +259,37 @@ def frame_units(
     if block_s is None:
         frame_unit[where] = scene_of_frame
         return frame_unit, len(scenes)
-    timestamps = []
-    for f in evaluated:
-        stamp = f.rpartition("/")[2]
-        if not stamp.isdigit():
-            raise ZendarError(
-                f"bootstrap over time blocks needs frame ids '<scene_id>/<timestamp_ns>': "
-                f"frame {f!r} has no integer timestamp after its last '/'"
-            )
-        timestamps.append(int(stamp))
+    timestamps = [_timestamp_ns(f) for f in evaluated]
     blocks, n_blocks = frame_blocks(scene_of_frame, np.array(timestamps, dtype=np.int64), block_s)
     frame_unit[where] = blocks
     return frame_unit, n_blocks
+
+
+#: The largest timestamp a frame id may carry: time blocks compute in int64 nanoseconds.
+_MAX_TIMESTAMP_NS = np.iinfo(np.int64).max
+
+
+def _timestamp_ns(frame_id: str) -> int:
+    """The integer timestamp after a frame id's last ``/``.
+
+    Raises
+    ------
+    ZendarError
+        Naming the frame when that part is not ASCII digits (``isdigit`` alone would let
+        superscripts and other scripts' digits through) or is beyond int64.
+    """
+    stamp = frame_id.rpartition("/")[2]
+    if not (stamp.isascii() and stamp.isdigit()):
+        raise ZendarError(
+            f"bootstrap over time blocks needs frame ids '<scene_id>/<timestamp_ns>': "
+            f"frame {frame_id!r} has no integer timestamp after its last '/'"
+        )
+    if len(stamp) > len(str(_MAX_TIMESTAMP_NS)) or int(stamp) > _MAX_TIMESTAMP_NS:  # int() refuses 4,301 digits
+        raise ZendarError(
+            f"bootstrap over time blocks needs timestamps of at most {_MAX_TIMESTAMP_NS} ns: "
+            f"frame {frame_id!r} has a larger one"
+        )
+    return int(stamp)
 
 
 def score_tables(
@@ -374,7 +396,8 @@ def _checked_tables(
 ) -> tuple[CheckedInput, CheckedInput]:
     """Both inputs read and validated; PredictionsError listing every problem of either."""
     pred_document, problems = load_document(predictions, what="predictions", max_bytes=max_bytes)
-    pred = read_predictions(pred_document) if not problems else CheckedInput(None, None, [])
+    read = pred_document is not None or not problems  # null is a document, refused by read_predictions
+    pred = read_predictions(pred_document) if read else CheckedInput(None, None, [])
     gt = load_ground_truth(ground_truth, split=split, max_bytes=max_bytes)
     problems += pred.problems + gt.problems
     if pred.frame_ids is not None and gt.frame_ids is not None:

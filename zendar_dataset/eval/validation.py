@@ -12,6 +12,7 @@ import gc
 import json
 import math
 import os
+import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from itertools import chain
@@ -33,6 +34,25 @@ _NUMBER_TYPES = frozenset({float, int})
 def _is_number_type(kind: type) -> bool:
     """int, float and numpy's integer and floating scalars (an API caller's values); never bool."""
     return kind in _NUMBER_TYPES or (issubclass(kind, (np.integer, np.floating)) and kind is not np.bool_)
+
+
+@dataclass(frozen=True)
+class _LongInteger:
+    """An integer literal longer than Python converts (4,300 digits by default), kept as its length.
+
+    Parsing goes on past it, so that the checks can name the frame, detection or meta field that
+    holds it, among every other problem.
+    """
+
+    digits: int
+
+
+def _parse_int(text: str) -> int | _LongInteger:
+    """``json``'s integer conversion, with a :class:`_LongInteger` where ``int`` refuses the length."""
+    try:
+        return int(text)
+    except ValueError:
+        return _LongInteger(len(text.lstrip("-")))
 
 
 @dataclass(frozen=True)
@@ -163,7 +183,9 @@ def load_document(
     Returns
     -------
     (document, problems)
-        ``document`` is None when ``problems`` is non-empty.
+        ``document`` is None when it could not be read. A readable file's keys given twice in one
+        object are ``problems`` too (:func:`duplicate_key_problems`), its document still returned
+        (each such key's last value, as JSON parsers keep it) so that the rest can be checked.
     """
     if not isinstance(source, (str, os.PathLike)):
         return source, []
@@ -179,26 +201,156 @@ def load_document(
             "(raise the limit with --max-bytes if this is intended)"
         ]
     raw = path.read_bytes()
+    document, problems = _parse(raw, f"{what} file {str(path)!r}", what)
+    if problems:
+        return None, problems
+    return document, duplicate_key_problems(raw, document, what=what)
+
+
+def _parse(raw: bytes, named: str, what: str) -> tuple[Any, list[str]]:
+    """(document, []) or (None, [why ``raw`` is not a JSON document]); ``named`` names the file."""
     try:
         # orjson parses large prediction files several times faster than the standard library.
         with _collector_paused():
             return orjson.loads(raw), []
     except orjson.JSONDecodeError:
-        # Strict JSON refused it: NaN/Infinity literals, huge integers or broken text. The
-        # standard parser accepts the literals (reported with their location by the column
-        # checks) and gives line/column positions for text that is really broken.
+        # Strict JSON refused it: NaN/Infinity literals, huge integers, lone surrogates or broken
+        # text. The standard parser accepts the first three (each reported with its location by
+        # the checks) and gives line/column positions for text that is really broken.
         pass
     try:
         with _collector_paused():
-            return json.loads(raw), []
+            return json.loads(raw, parse_int=_parse_int), []
     except UnicodeDecodeError as exc:
-        return None, [f"{what} file {str(path)!r} is not JSON text: {exc}"]
+        return None, [f"{named} is not JSON text: {exc}"]
     except json.JSONDecodeError as exc:
-        return None, [f"{what} file {str(path)!r} is not valid JSON: {exc}"]
-    except ValueError as exc:  # an integer literal longer than Python converts (4300 digits by default)
-        return None, [f"{what} file {str(path)!r} holds a number that cannot be read: {exc}"]
+        return None, [f"{named} is not valid JSON: {exc}"]
     except RecursionError:
-        return None, [f"{what} file {str(path)!r} is nested too deeply to be a {what} file"]
+        return None, [f"{named} is nested too deeply to be a {what} file"]
+
+
+#: The member of each kind of document that maps frame ids to detections.
+_FRAMES_MEMBER = {"predictions": "results", "ground truth": "frames"}
+
+
+def duplicate_key_problems(raw: bytes, document: Any, *, what: str) -> list[str]:
+    """Every key given more than once in one object of the JSON text ``raw``, each named with where.
+
+    JSON parsers keep a repeated key's last value without a word, so a frame given twice would
+    silently lose its first detections. Proving there is no repeat is cheap: outside strings, a
+    ``:`` follows each key and nothing else, so the count of ``:`` in ``raw`` less those inside the
+    document's strings bounds the keys written from above; the keys the parsed ``document`` holds
+    bound them from below; equal bounds leave no room for a repeat. Only when they differ is
+    ``raw`` parsed again, slowly, to name each repeat.
+
+    Parameters
+    ----------
+    raw
+        The file's bytes.
+    document
+        ``raw`` parsed.
+    what
+        "predictions" or "ground truth", used in messages.
+
+    Returns
+    -------
+    list of str
+        One problem per repeated key, object by object (an object before those inside it).
+    """
+    keys, colons_in_strings = _keys_and_colons(document)
+    if _keys_written_at_most(raw, colons_in_strings) == keys:
+        return []
+    return _repeated_key_problems(raw, what)
+
+
+def _keys_and_colons(document: Any) -> tuple[int, int]:
+    """At most the keys of ``document``'s objects, and at most the ``:`` in its strings.
+
+    A frame mapping's detections are counted at C speed without looking inside them: the keys of
+    objects nested in a detection and the ``:`` in its strings are left out (both err on the side
+    of the slow exact pass).
+    """
+    keys = colons = 0
+    stack = [document]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, str):
+            colons += value.count(":")
+        elif isinstance(value, dict):
+            keys += len(value)
+            colons += "".join(value).count(":")  # parsed from JSON text: every key is a string
+            try:
+                keys += sum(map(dict.__len__, chain.from_iterable(map(list.__iter__, value.values()))))
+            except TypeError:  # not a frame mapping (meta, or a malformed frame): walk it
+                stack.extend(value.values())
+        elif isinstance(value, list):
+            stack.extend(value)
+    return keys, colons
+
+
+def _keys_written_at_most(raw: bytes, colons_in_strings: int) -> int:
+    r"""An upper bound of the keys written in ``raw``: its ``:`` less those known to be in strings.
+
+    ``colons_in_strings`` counts the ``:`` of parsed strings, which may each have been written as
+    the escape ``\u003a``: every such escape written is allowed for.
+    """
+    colons = int(np.count_nonzero(np.frombuffer(raw, dtype=np.uint8) == ord(":")))  # twice bytes.count's speed
+    if colons_in_strings and json.detect_encoding(raw).startswith("utf-8"):
+        # Counting every escape \u0030 to \u003f overcounts, which is safe; most files hold no "\" at all.
+        escapes = raw.count(b"\\u003") if b"\\" in raw else 0
+        colons -= max(0, colons_in_strings - escapes)
+    return colons
+
+
+class _Object(dict):
+    """A parsed JSON object that remembers the keys its text gave more than once, and how often."""
+
+    repeated: dict[str, int]
+
+
+def _object_of_pairs(pairs: list[tuple[str, Any]]) -> _Object:
+    # Like json's own objects, the last value of a repeated key is kept.
+    value = _Object(pairs)
+    value.repeated = {}
+    if len(value) < len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                value.repeated[key] = value.repeated.get(key, 1) + 1
+            seen.add(key)
+    return value
+
+
+def _repeated_key_problems(raw: bytes, what: str) -> list[str]:
+    """The exact pass of :func:`duplicate_key_problems`: ``raw`` parsed again, every repeat named."""
+    with _collector_paused():
+        document = json.loads(raw, object_pairs_hook=_object_of_pairs, parse_int=_parse_int)
+    problems = []
+    stack: list[tuple[tuple[str | int, ...], Any]] = [((), document)]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, _Object):
+            problems.extend(_repeat_problem(what, path, key, times) for key, times in value.repeated.items())
+            stack.extend(((*path, key), item) for key, item in reversed(value.items()))
+        elif isinstance(value, list):
+            stack.extend(((*path, index), item) for index, item in reversed(list(enumerate(value))))
+    return problems
+
+
+def _repeat_problem(what: str, path: tuple[str | int, ...], key: str, times: int) -> str:
+    """The message for ``key`` given ``times`` times in the object at ``path``."""
+    frames = _FRAMES_MEMBER.get(what)
+    if path == (frames,):
+        return f"{what}: frame {key!r} is given {times} times in {frames!r} (a JSON reader keeps only the last)"
+    if len(path) == 3 and path[0] == frames and isinstance(path[2], int):
+        return f"{what} frame {path[1]!r} detection {path[2]}: {key!r} is given {times} times"
+    where = "at the top level" if not path else f"in {_json_path(path)!r}"
+    return f"{what}: key {key!r} is given {times} times {where}"
+
+
+def _json_path(path: tuple[str | int, ...]) -> str:
+    """``("meta", "tags", 2)`` as ``meta.tags[2]``."""
+    return "".join(f"[{part}]" if isinstance(part, int) else f".{part}" for part in path).lstrip(".")
 
 
 def _type_name(value: Any) -> str:
@@ -212,6 +364,8 @@ def _short(value: Any) -> str:
 
 def _number_problem(value: Any) -> str | None:
     """Why ``value`` is not a finite JSON number, or None when it is one."""
+    if isinstance(value, _LongInteger):
+        return f"is too large for a float (an integer of {value.digits:,} digits)"
     if not _is_number_type(type(value)):  # bool is a subclass of int and is refused here
         return f"must be a number, got {_type_name(value)} {_short(value)}"
     try:
@@ -221,6 +375,57 @@ def _number_problem(value: Any) -> str | None:
     if not math.isfinite(as_float):
         return f"is not finite ({value})"
     return None
+
+
+#: A code point of UTF-16's surrogate range: in a parsed string, always one of a broken pair.
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _text_problem(text: str) -> str | None:
+    r"""Why ``text`` cannot be printed or written as UTF-8, or None when it can.
+
+    Python's ``json`` reads the escape of half a surrogate pair (``"\ud800"``) into a string that
+    no UTF-8 output can hold; orjson, like strict JSON readers, refuses the file outright.
+    """
+    lone = _SURROGATE.search(text)
+    if lone is None:
+        return None
+    return f"is not valid Unicode text: it holds a lone surrogate ({lone.group()!r}) at character {lone.start() + 1}"
+
+
+def _meta_value_problem(value: Any) -> str | None:
+    """Why a scalar of ``meta`` cannot be printed or written to metrics.json, or None."""
+    if isinstance(value, str):
+        return _text_problem(value)
+    if isinstance(value, _LongInteger):
+        return f"is an integer of {value.digits:,} digits, too long to read"
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"is not finite ({value})"
+    if value is None or isinstance(value, (bool, int, float)):
+        return None
+    return f"is not a JSON value (got {_type_name(value)})"
+
+
+def _meta_problems(meta: dict) -> list[str]:
+    """Every value (and key) of ``meta``, at any depth, that its printing or metrics.json, which
+    copies it, could not hold: text that is not Unicode, non-finite numbers, non-JSON values."""
+    problems = []
+    stack: list[tuple[str, Any]] = [("meta", meta)]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, dict):
+            for key in value:
+                reason = _text_problem(key) if isinstance(key, str) else "is not a string"
+                if reason:
+                    problems.append(f"predictions: a key of {path!r} ({_short(key)}) {reason}")
+            stack.extend((f"{path}.{key}", item) for key, item in reversed(value.items()))
+        elif isinstance(value, list):
+            stack.extend((f"{path}[{index}]", item) for index, item in reversed(list(enumerate(value))))
+        else:
+            reason = _meta_value_problem(value)
+            if reason:
+                problems.append(f"predictions: {path!r} {reason}")
+    return problems
 
 
 def _detection_problems(
@@ -420,8 +625,10 @@ def read_predictions(document: Any, *, max_problems: int | None = None) -> Check
     if not isinstance(meta, dict):
         problems.append(f"predictions: 'meta' must be an object, got {_type_name(meta)}")
         meta = {}
-    elif "method" in meta and not isinstance(meta["method"], str):
-        problems.append(f"predictions: 'meta.method' must be a string, got {_type_name(meta['method'])}")
+    else:
+        if "method" in meta and not isinstance(meta["method"], str):
+            problems.append(f"predictions: 'meta.method' must be a string, got {_type_name(meta['method'])}")
+        problems += _meta_problems(meta)
     if "results" not in document:
         problems.append(
             "predictions: missing 'results' (an object mapping frame id to a list of detections)"
@@ -459,17 +666,24 @@ def read_ground_truth_document(document: Any) -> CheckedInput:
             f"ground truth: expected a JSON object with 'frames', got {_type_name(document)}"
         ])
     split = document.get("split") if isinstance(document.get("split"), str) else None
+    problems = []
+    if split is not None and _text_problem(split):  # the split is printed and written to metrics.json
+        problems.append(f"ground truth: 'split' {_text_problem(split)}")
+        split = None
     if "frames" not in document:
-        return CheckedInput(None, None, [
-            "ground truth: missing 'frames' (an object mapping frame id to a list of objects)"
-        ], split=split)
+        problems.append("ground truth: missing 'frames' (an object mapping frame id to a list of objects)")
+        return CheckedInput(None, None, problems, split=split)
     frames = document["frames"]
     if not isinstance(frames, dict):
-        return CheckedInput(None, None, [
+        problems.append(
             f"ground truth: 'frames' must be an object mapping frame id to a list, got {_type_name(frames)}"
-        ], split=split)
+        )
+        return CheckedInput(None, None, problems, split=split)
     checked = read_frames(frames, who="ground truth", required=GROUND_TRUTH_REQUIRED)
     checked.split = split
+    if problems:
+        checked.problems[:0] = problems
+        checked.table = None
     return checked
 
 
