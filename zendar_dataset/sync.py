@@ -31,6 +31,9 @@ from zendar_dataset.errors import ZendarFormatError
 
 MISSING = -1
 
+#: Largest tolerance in ms (about 285 years): its ns still fit int64, the type of every timestamp.
+MAX_TOLERANCE_MS = 9e12
+
 TOLERANCE_HELP = (
     "tolerance_ms is a number (milliseconds, all streams) or a dict keyed by "
     "'<group>/<sensor>' or '<group>'"
@@ -105,8 +108,8 @@ def resolve_tolerances_ns(
     Raises
     ------
     ValueError
-        For a negative tolerance or a dict key that names no stream (a typo would
-        otherwise silently fall back to the default).
+        For a tolerance that is negative, not finite or above :data:`MAX_TOLERANCE_MS`, or a dict
+        key that names no stream (a typo would otherwise silently fall back to the default).
     """
     names = [s.name for s in streams if not s.interpolated]
     groups = {name.split("/", 1)[0] for name in names}
@@ -125,8 +128,12 @@ def resolve_tolerances_ns(
     else:
         raise ValueError(f"{TOLERANCE_HELP}; got {tolerance_ms!r}")
     for value in values:
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not value >= 0:
-            raise ValueError(f"tolerances must be non-negative numbers of ms, got {value!r}")
+        # inf, or a value whose ns do not fit int64, would overflow when rounded to ns below.
+        if (not isinstance(value, (int, float)) or isinstance(value, bool)
+                or not 0 <= value <= MAX_TOLERANCE_MS):
+            raise ValueError(
+                f"tolerances must be non-negative, finite numbers of ms up to {MAX_TOLERANCE_MS:g}, got {value!r}"
+            )
 
     tolerances: dict[str, int] = {}
     for stream in streams:

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from zendar_dataset.cli.arguments import positive_number, seed_count, split_ratios, whole_number
+from zendar_dataset.cli.arguments import number_between, positive_number, seed_count, split_ratios, whole_number
 from zendar_leaderboard.cli import main as zendar_leaderboard
 
 
@@ -17,6 +17,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--time-limit-s", type=positive_number("--time-limit-s"), default=1.0)
     parser.add_argument("--seeds", type=seed_count(100), default=None)
     parser.add_argument("--split-ratios", type=split_ratios, default=(0.6, 0.2, 0.2))
+    parser.add_argument("--tolerance-ms", type=number_between("--tolerance-ms", 0, 1_000), default=None)
     return parser
 
 
@@ -31,9 +32,12 @@ def _error_lines(capsys, args: list[str]) -> list[str]:
 
 def test_good_values_are_converted():
     args = _parser().parse_args(
-        ["--seed", "0", "--bootstrap", "100000", "--time-limit-s", "0.5", "--seeds", "3", "--split-ratios", "1,0,0"]
+        ["--seed", "0", "--bootstrap", "100000", "--time-limit-s", "0.5", "--seeds", "3", "--split-ratios", "1,0,0",
+         "--tolerance-ms", "1000"]
     )
-    assert (args.seed, args.bootstrap, args.time_limit_s, args.seeds, args.split_ratios) == (0, 100_000, 0.5, 3, (1.0, 0.0, 0.0))
+    assert (args.seed, args.bootstrap, args.time_limit_s, args.seeds, args.split_ratios, args.tolerance_ms) == (
+        0, 100_000, 0.5, 3, (1.0, 0.0, 0.0), 1000.0
+    )
 
 
 @pytest.mark.parametrize(
@@ -48,6 +52,20 @@ def test_good_values_are_converted():
         (["--seeds", "0"], "tool: error: argument --seeds: expected 1 to 100 seeds, got 0"),
         (["--seeds", "three"], "tool: error: argument --seeds: expected a whole number of seeds, got 'three'"),
         (["--split-ratios", "1,2"], "tool: error: argument --split-ratios: expected three numbers (train,val,test), got '1,2'"),
+        (["--time-limit-s", "nan"], "tool: error: --time-limit-s must be a finite number, got nan"),
+        (["--time-limit-s", "inf"], "tool: error: --time-limit-s must be a finite number, got inf"),
+        (["--tolerance-ms=-0.5"], "tool: error: --tolerance-ms must be between 0 and 1,000, got -0.5"),
+        (["--tolerance-ms", "1e308"], "tool: error: --tolerance-ms must be between 0 and 1,000, got 1e308"),
+        (["--tolerance-ms", "NaN"], "tool: error: --tolerance-ms must be a finite number, got NaN"),
+        (["--tolerance-ms", "soon"], "tool: error: argument --tolerance-ms: invalid float value: 'soon'"),
+        (["--split-ratios", "nan,0,1"], "tool: error: argument --split-ratios: expected finite shares of 0 or more "
+         "(train,val,test) with a positive, finite sum, got 'nan,0,1'"),
+        (["--split-ratios", "1e308,1e308,1e308"], "tool: error: argument --split-ratios: expected finite shares of 0 "
+         "or more (train,val,test) with a positive, finite sum, got '1e308,1e308,1e308'"),
+        (["--split-ratios", "0,0,0"], "tool: error: argument --split-ratios: expected finite shares of 0 or more "
+         "(train,val,test) with a positive, finite sum, got '0,0,0'"),
+        (["--split-ratios=-1,1,1"], "tool: error: argument --split-ratios: expected finite shares of 0 or more "
+         "(train,val,test) with a positive, finite sum, got '-1,1,1'"),
     ],
 )
 def test_a_bad_value_exits_2_with_one_error_line(capsys, args, line):

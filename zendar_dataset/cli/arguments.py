@@ -15,6 +15,7 @@ Examples
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 
 #: Where the tools that compute on arrays can run (``--device``).
@@ -63,15 +64,49 @@ def whole_number(option: str, minimum: int, maximum: int | None = None) -> Calla
 
 
 def positive_number(option: str) -> Callable[[str], float]:
-    """A ``type=`` for a number option above 0 (a time limit): ``--time-limit-s must be positive, got 0.0``."""
+    """A ``type=`` for a finite number option above 0 (a time limit): ``--time-limit-s must be positive, got 0.0``,
+    ``--time-limit-s must be a finite number, got inf``."""
 
     def check(text: str) -> float:
-        value = _parse(text, float)
+        value = _finite(option, text)
         if value <= 0:
             raise _out_of_range(f"{option} must be positive, got {value}")
         return value
 
     return check
+
+
+def number_between(option: str, minimum: float, maximum: float) -> Callable[[str], float]:
+    """A ``type=`` for a finite number option from ``minimum`` to ``maximum``, both inclusive.
+
+    Parameters
+    ----------
+    option : str
+        The option's name, which starts the message: ``--tolerance-ms must be between 0 and 86,400,000, got -1``.
+    minimum, maximum : float
+        The bounds (pass whole numbers as ``int`` to print them without a decimal point).
+
+    Returns
+    -------
+    callable
+        Text -> float, raising argparse's errors.
+    """
+
+    def check(text: str) -> float:
+        value = _finite(option, text)
+        if not minimum <= value <= maximum:
+            raise _out_of_range(f"{option} must be between {minimum:,} and {maximum:,}, got {text.strip()}")
+        return value
+
+    return check
+
+
+def _finite(option: str, text: str) -> float:
+    # float() takes "nan" and "inf", and a comparison with nan is always False, so bounds alone let it through.
+    value = _parse(text, float)
+    if not math.isfinite(value):
+        raise _out_of_range(f"{option} must be a finite number, got {text.strip()}")
+    return value
 
 
 def seed_count(maximum: int) -> Callable[[str], int]:
@@ -90,11 +125,17 @@ def seed_count(maximum: int) -> Callable[[str], int]:
 
 
 def split_ratios(text: str) -> tuple[float, float, float]:
-    """A ``type=`` for ``train,val,test`` shares of the scenes, e.g. ``0.6,0.2,0.2``."""
+    """A ``type=`` for ``train,val,test`` shares of the scenes, e.g. ``0.6,0.2,0.2``: finite, 0 or more,
+    with a positive (finite) sum."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected three numbers like 0.6,0.2,0.2, got {text!r}") from None
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three numbers (train,val,test), got {text!r}")
+    # The sum is checked too: three finite shares of 1e308 add up to inf, and the shares are divided by it.
+    if not all(math.isfinite(v) and v >= 0 for v in values) or not 0 < sum(values) < math.inf:
+        raise argparse.ArgumentTypeError(
+            f"expected finite shares of 0 or more (train,val,test) with a positive, finite sum, got {text!r}"
+        )
     return values  # type: ignore[return-value]

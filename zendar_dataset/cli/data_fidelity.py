@@ -21,16 +21,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("root", metavar="ROOT", help="dataset root")
     parser.add_argument("--split", default=None, help="only this split's scenes (default: every scene)")
-    parser.add_argument("--out", metavar="DIR", default=None, help=f"also write DIR/{REPORT_JSON} (replaced if present)")
+    parser.add_argument("--out", metavar="DIR", default=None,
+                        help=f"also write DIR/{REPORT_JSON} (replaced if present); DIR must be outside ROOT")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     import pathlib
 
-    from zendar_dataset.fidelity import fidelity_report, format_report
     from zendar_dataset.atomic_files import write_json_atomic
+    from zendar_dataset.fidelity import fidelity_report, format_report
+    from zendar_dataset.output_location import refuse_output_inside
 
+    if args.out is not None:
+        # Checked before measuring, which takes minutes: no command writes into a dataset it reads.
+        refuse_output_inside(args.out, datasets=(args.root,), what="--out")
     report = fidelity_report(args.root, args.split, progress=lambda scene: print(f"measuring {scene}", file=sys.stderr))
     print(format_report(report))
     if args.out is not None:

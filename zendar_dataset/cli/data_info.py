@@ -7,9 +7,12 @@ import argparse
 
 import numpy as np
 
+from zendar_dataset.cli.arguments import number_between
 from zendar_dataset.cli.common import EXIT_OK
 
 ALL_GROUPS = ("radar", "sar", "camera", "lidar", "tracklog", "labels")
+#: Largest ``--tolerance-ms``: one day, far beyond any scene, so every larger value would match the same.
+MAX_TOLERANCE_MS = 86_400_000
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -23,7 +26,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("root", metavar="ROOT", help="dataset root (directory or fsspec URL)")
     parser.add_argument("--split", help="only this split (default: all)")
     parser.add_argument(
-        "--tolerance-ms", type=float, default=None, help="one matching tolerance for every stream (default: per stream)"
+        "--tolerance-ms",
+        type=number_between("--tolerance-ms", 0, MAX_TOLERANCE_MS),
+        default=None,
+        help=f"one matching tolerance for every stream, 0 to {MAX_TOLERANCE_MS:,} ms (one day; default: per stream)",
     )
     parser.set_defaults(func=run)
 

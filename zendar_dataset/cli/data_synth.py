@@ -8,7 +8,8 @@ from zendar_dataset.cli.arguments import DEVICES, split_ratios, whole_number
 from zendar_dataset.cli.common import writing
 from zendar_dataset.cluster import SCHEDULER_ENV, refuse_url_output, scheduler_address
 from zendar_dataset.errors import ZendarError
-from zendar_dataset.sim.profiles import PROFILES
+from zendar_dataset.sim.generate import MAX_SCENE_DURATION_S, MAX_SCENES, MAX_SEED
+from zendar_dataset.sim.profiles import MIN_SCENE_DURATION_S, PROFILES
 
 
 def default_jobs(n_scenes: int) -> int:
@@ -37,12 +38,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("out", metavar="OUT", help="dataset root to create (new or empty, or an interrupted run)")
     parser.add_argument("--profile", choices=sorted(PROFILES), default="demo", help="size of the simulation (default: demo)")
-    parser.add_argument("--scenes", type=whole_number("--scenes", 1), default=None, help="number of scenes (default: the profile's)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument("--scenes", type=whole_number("--scenes", 1, MAX_SCENES), default=None,
+                        help=f"number of scenes, 1 to {MAX_SCENES:,} (default: the profile's)")
+    parser.add_argument("--seed", type=whole_number("--seed", 0, MAX_SEED), default=0,
+                        help=f"random seed, 0 to {MAX_SEED:,} (2**32 - 1; default: 0)")
+    # Range checked with the profile (SimProfile.with_duration, then synthesize_dataset), before anything is
+    # written: one message for every duration problem, whichever way the dataset is made.
     parser.add_argument("--duration-s", type=float, default=None, metavar="SECONDS",
-                        help="length of each scene (default: the profile's; at least 0.5, a multiple of 0.1); recorded "
-                        "with the profile in OUT/simulation.json")
-    parser.add_argument("--split-ratios", type=split_ratios, default=(0.6, 0.2, 0.2), help="train,val,test (default: 0.6,0.2,0.2)")
+                        help=f"length of each scene (default: the profile's; {MIN_SCENE_DURATION_S:g} to "
+                        f"{MAX_SCENE_DURATION_S:,}, a multiple of 0.1); recorded with the profile in OUT/simulation.json")
+    parser.add_argument("--split-ratios", type=split_ratios, default=(0.6, 0.2, 0.2),
+                        help="train,val,test shares: finite, 0 or more, with a positive sum (default: 0.6,0.2,0.2)")
     parser.add_argument("--backend", choices=("zarr", "hdf5"), default="zarr", help="scene store format (default: zarr)")
     parser.add_argument("--withhold-test-labels", action="store_true",
                         help="write test scenes without labels and their ground truth to OUT/test_ground_truth.json")

@@ -67,13 +67,14 @@ def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bo
     grid = checksums.grid_shape(shape, chunks)
     computed: list[int] = []
     if not shape:
-        target[...] = source[...]
-        computed = checksums.block_checksums(np.asarray(source[...]), chunks)
+        value = _read_rows(source, None, chunks, scene, path)
+        target[...] = value
+        computed = checksums.block_checksums(value, chunks)
     elif source.size:
         row_bytes = max(1, int(np.prod(shape[1:], dtype=np.int64)) * np.dtype(source.dtype).itemsize)
         step = max(chunks[0], (_COPY_BLOCK_BYTES // row_bytes) // chunks[0] * chunks[0])
         for start in range(0, shape[0], step):
-            block = np.asarray(source[start : start + step])
+            block = _read_rows(source, slice(start, start + step), chunks, scene, path)
             target[start : start + step] = block
             for coords, index, found in checksums.array_chunk_checksums(block, start, chunks, grid):
                 computed.append(found)
@@ -84,6 +85,45 @@ def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bo
                     )
     attrs[checksums.ARRAY_ATTR] = checksums.encode(computed)
     stores.write_attrs(target, attrs)
+
+
+def _read_rows(source: Any, rows: slice | None, chunks: tuple[int, ...], scene: str, path: str) -> np.ndarray:
+    """``source[rows]`` (``source[...]`` for ``None``), its chunk-aligned rows read whole.
+
+    Raises
+    ------
+    ZendarFormatError
+        When stored bytes do not decode, naming the scene, the array and the first unreadable
+        chunk row, as ``zendar-data validate`` does.
+    """
+    try:
+        return np.asarray(source[...] if rows is None else source[rows])
+    except stores.DECODE_ERRORS as exc:
+        cause = exc
+    if rows is None:
+        where, span = [], ""
+    else:
+        # A block spans several chunk rows: read them one by one to name the one that fails.
+        where, span = _first_unreadable_row(source, rows, chunks)
+    raise ZendarFormatError(
+        f"{scene}: {path}: chunk {where}: expected a readable chunk{span}, found a truncated or corrupt one "
+        f"({type(cause).__name__}: {cause}); the source is corrupt"
+    ) from None
+
+
+def _first_unreadable_row(source: Any, rows: slice, chunks: tuple[int, ...]) -> tuple[list, str]:
+    """Chunk coordinates (``*`` for an axis of several chunks) and row span of the first chunk row of
+    ``rows`` that does not decode; the whole block when each row alone reads (a flaky read)."""
+    grid = checksums.grid_shape(tuple(source.shape), chunks)
+    stop = min(rows.stop, source.shape[0])
+    for start in range(rows.start, stop, chunks[0]):
+        try:
+            source[start : start + chunks[0]]
+        except stores.DECODE_ERRORS:
+            where = [start // chunks[0], *(0 if g == 1 else "*" for g in grid[1:])]
+            return where, f" (rows {start}:{min(start + chunks[0], stop)})"
+    first, last = rows.start // chunks[0], (stop - 1) // chunks[0]
+    return [f"{first}..{last}", *(0 if g == 1 else "*" for g in grid[1:])], f" (rows {rows.start}:{stop})"
 
 
 def convert_scene(source_root: Any, target_path: pathlib.Path, backend: str, scene: str = "") -> None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import numbers
 import os
 import pathlib
@@ -48,12 +49,30 @@ SIDECAR = "simulation.json"
 GROUND_TRUTH_DIR = "ground_truth"
 TEST_GROUND_TRUTH = "test_ground_truth.json"
 
+#: Most scenes in one dataset: their ids (``scene-0000``...) keep four digits, so they sort in scene order.
+MAX_SCENES = 10_000
+#: Largest seed: a scene's random streams are seeded with ``[seed, scene index, stream]``, and numpy splits a
+#: larger seed into several 32-bit words, which would make ``(seed, scene)`` pairs share streams.
+MAX_SEED = 2**32 - 1
+#: Longest scene in seconds (one hour): a scene is one task, simulated and written by one process.
+MAX_SCENE_DURATION_S = 3600
+
 
 def split_scene_ids(n_scenes: int, split_ratios: tuple[float, float, float]) -> dict[str, list[str]]:
-    """Scene ids ``scene-0000``... assigned in order to train, val and test by ``split_ratios``."""
+    """Scene ids ``scene-0000``... assigned in order to train, val and test by ``split_ratios``.
+
+    Raises
+    ------
+    ZendarError
+        Unless ``split_ratios`` are three finite numbers of 0 or more with a positive, finite sum.
+    """
     ratios = [float(r) for r in split_ratios]
-    if len(ratios) != 3 or any(r < 0 for r in ratios) or sum(ratios) <= 0:
-        raise ZendarError(f"split ratios must be three non-negative numbers (train, val, test), got {split_ratios!r}")
+    # The sum is checked as well: the shares are divided by it, and finite shares can add up to inf.
+    if len(ratios) != 3 or not all(math.isfinite(r) and r >= 0 for r in ratios) or not 0 < sum(ratios) < math.inf:
+        raise ZendarError(
+            f"split ratios must be three finite numbers of 0 or more (train, val, test) with a positive, finite sum, "
+            f"got {split_ratios!r}"
+        )
     total = sum(ratios)
     n_val = int(round(n_scenes * ratios[1] / total))
     n_test = min(n_scenes - n_val, int(round(n_scenes * ratios[2] / total)))
@@ -166,9 +185,9 @@ def synthesize_dataset(
         Dataset root; must be new, empty, or a previous run with the same settings.
     profile : {"tiny", "demo", "paper"} or SimProfile
     n_scenes : int, optional
-        Default: the profile's ``default_scenes``.
+        1 to :data:`MAX_SCENES`; default: the profile's ``default_scenes``.
     seed : int
-        Same seed and profile give byte-identical arrays, whatever ``jobs``.
+        0 to :data:`MAX_SEED`. Same seed and profile give byte-identical arrays, whatever ``jobs``.
     split_ratios : (train, val, test)
     backend : {"zarr", "hdf5"}
     progress : bool
@@ -201,7 +220,8 @@ def synthesize_dataset(
     Raises
     ------
     ZendarError
-        When ``out`` holds something else, or an argument is invalid, or
+        When ``out`` holds something else, or an argument is invalid (more than :data:`MAX_SCENES`
+        scenes, a seed outside 0 to :data:`MAX_SEED`, scenes longer than :data:`MAX_SCENE_DURATION_S`), or
         ``jobs > 1`` is asked from the top level of an unguarded main script,
         or ``out`` is a URL or a directory some worker of ``scheduler`` does not see.
     zendar_dataset.cluster.ClusterUnavailable
@@ -217,8 +237,7 @@ def synthesize_dataset(
     """
     profile = get_profile(profile)
     n_scenes = profile.default_scenes if n_scenes is None else int(n_scenes)
-    if n_scenes < 1:
-        raise ZendarError(f"the number of scenes must be at least 1, got {n_scenes}")
+    _check_size(n_scenes, seed, profile)
     if backend not in BACKEND_SUFFIX:
         raise ZendarError(f"backend must be one of {sorted(BACKEND_SUFFIX)}, got {backend!r}")
     if isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 1:
@@ -238,6 +257,24 @@ def synthesize_dataset(
         _synthesize_into(out, profile, n_scenes, seed, split_ratios, backend, progress, withhold_test_labels, jobs,
                          sar_device, splits, cluster)
     return out
+
+
+def _check_size(n_scenes: int, seed: int, profile: SimProfile) -> None:
+    """Refuse a scene count, seed or scene duration out of range, before anything is written.
+
+    Raises
+    ------
+    ZendarError
+        Naming the value and its range (:data:`MAX_SCENES`, :data:`MAX_SEED`, :data:`MAX_SCENE_DURATION_S`).
+    """
+    if not 1 <= n_scenes <= MAX_SCENES:
+        raise ZendarError(f"the number of scenes must be between 1 and {MAX_SCENES:,}, got {n_scenes}")
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed <= MAX_SEED:
+        raise ZendarError(f"the seed must be a whole number between 0 and {MAX_SEED:,} (2**32 - 1), got {seed!r}")
+    if profile.scene_duration_s > MAX_SCENE_DURATION_S:
+        raise ZendarError(
+            f"the scene duration must be at most {MAX_SCENE_DURATION_S:,} s, got {profile.scene_duration_s:g} s"
+        )
 
 
 def _synthesize_into(out: pathlib.Path, profile: SimProfile, n_scenes: int, seed: int, split_ratios, backend: str,
@@ -413,4 +450,7 @@ def _frames(scene_id: str, labels: dict, truth, profile: SimProfile) -> dict:
     return frames
 
 
-__all__ = ["DATASET_JSON", "SceneSynthesisError", "synthesize_dataset", "split_scene_ids", "usable_cpus"]
+__all__ = [
+    "DATASET_JSON", "MAX_SCENES", "MAX_SCENE_DURATION_S", "MAX_SEED", "SceneSynthesisError", "synthesize_dataset",
+    "split_scene_ids", "usable_cpus",
+]
