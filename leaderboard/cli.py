@@ -28,7 +28,7 @@ def _existing_store(db: str):
 
     if not Path(db).is_file():
         raise ZendarError(f"no leaderboard database at {db!r} (create one with add-team)")
-    return Store(db)
+    return Store(db, existing=True)  # an empty or foreign file is refused, not given the tables
 
 
 def _check(args: argparse.Namespace) -> int:
@@ -152,6 +152,17 @@ def _submit_token(args: argparse.Namespace) -> str:
     return token
 
 
+def _server_url(text: str) -> str:
+    """``type=`` of ``submit --server``: a URL that cannot name a server is refused before anything is sent."""
+    from zendar_leaderboard.client import check_server_url
+
+    try:
+        return check_server_url(text)
+    except ValueError as exc:
+        # Printed as "PROG: error: MESSAGE", like the shared checks of command-line values.
+        raise argparse.ArgumentError(None, f"invalid --server URL {text!r}: {exc}") from None
+
+
 def _submit(args: argparse.Namespace) -> int:
     from zendar_leaderboard.client import ServerUnreachable, submit
 
@@ -195,6 +206,7 @@ def _admin(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from zendar_dataset.eval.protocol import MAX_BOOTSTRAP_RESAMPLES
+    from zendar_leaderboard.store import MAX_SUBMISSION_ID
     from zendar_leaderboard.submission import DEFAULT_MAX_BYTES
 
     max_bytes = whole_number("--max-bytes", 1)
@@ -215,7 +227,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gt", required=True, help="ground truth: an export-gt file or a dataset root (with --split)")
     p.add_argument("--db", required=True, help="SQLite database (created if missing)")
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=8000, help="port (0: any free port, printed)")
+    p.add_argument("--port", type=whole_number("--port", 0, 65_535), default=8000,
+                   help="port (0: any free port, printed)")
     p.add_argument("--split", default=None, help="split of a dataset root (default: test when labelled, else val)")
     p.add_argument("--quota", type=whole_number("--quota", 1), default=3,
                    help="scored submissions per team per rolling 30 days (default 3)")
@@ -243,13 +256,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("submit", help="upload a submission, wait for its score and print it")
     p.add_argument("file", metavar="FILE")
-    p.add_argument("--server", required=True, help="the leaderboard's URL, e.g. http://127.0.0.1:8000")
+    p.add_argument("--server", type=_server_url, required=True,
+                   help="the leaderboard's URL, e.g. http://127.0.0.1:8000")
     tokens = p.add_mutually_exclusive_group()
     tokens.add_argument("--token-file", default=None, metavar="PATH", help="a file holding the team's token")
     tokens.add_argument("--token", default=None,
                         help=f"the team's token (visible to other users of this machine; prefer --token-file or {TOKEN_VARIABLE})")
     p.add_argument("--no-wait", action="store_true", help="return once queued")
-    p.add_argument("--timeout-s", type=float, default=3600.0, help="give up waiting after this long (default 3600)")
+    p.add_argument("--timeout-s", type=positive_number("--timeout-s"), default=3600.0,
+                   help="give up waiting after this long (default 3600)")
     p.set_defaults(func=_submit)
 
     p = sub.add_parser("render", help="write the static site: index.html, leaderboard.json, leaderboard.csv")
@@ -260,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (("hide", "hide an entry from the ranking"), ("unhide", "show a hidden entry again"),
                        ("delete", "delete a submission and its score")):
         p = sub.add_parser(name, help=text)
-        p.add_argument("id", type=int, metavar="ID")
+        p.add_argument("id", type=whole_number("ID", 1, MAX_SUBMISSION_ID), metavar="ID")
         p.add_argument("--db", required=True)
         p.set_defaults(func=_admin)
     p = sub.add_parser("close-round", help="show the private part's scores and stop taking submissions")

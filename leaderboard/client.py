@@ -31,6 +31,31 @@ class ServerUnreachable(OSError):
     """The server could not be reached (an environment failure, not the user's file)."""
 
 
+def check_server_url(url: str) -> str:
+    """``url`` when it can name a leaderboard: ``http(s)://HOST[:PORT][/PATH]``.
+
+    Raises
+    ------
+    ValueError
+        Saying what is wrong: another scheme or none, no host, a port out of 1-65535, a query,
+        fragment or user name (the API paths are appended to it), a space or a control character.
+    """
+    if any(ord(character) <= 0x20 or ord(character) == 0x7F for character in url):
+        raise ValueError("it holds a space or a control character")
+    parts = urlsplit(url)  # ValueError: "Invalid IPv6 URL"
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError("expected http://HOST[:PORT] or https://HOST[:PORT]")
+    try:
+        connectable = parts.port != 0
+    except ValueError:  # not a number, or above 65535
+        connectable = False
+    if not connectable:
+        raise ValueError("the port must be a number from 1 to 65535")
+    if "?" in url or "#" in url or "@" in parts.netloc:
+        raise ValueError("a query, fragment or user name cannot be part of it")
+    return url
+
+
 def _answer_document(raw: bytes, reason: str) -> Any:
     try:
         return json.loads(raw)

@@ -58,12 +58,18 @@ def _previous_export(out: Path, shown: str) -> None:
     present = sorted(path.relative_to(out).as_posix() for path in out.rglob("*") if not path.is_dir())
     if not present:
         return
-    try:
-        written = set(orjson.loads((out / MANIFEST_NAME).read_bytes())["files"])
-    except (OSError, orjson.JSONDecodeError, KeyError, TypeError):
+    manifest = out / MANIFEST_NAME
+    if not manifest.is_file():
         raise ZendarError(
             f"output {shown!r} is a folder that is not a leaderboard export (no {MANIFEST_NAME} in it): "
             "render into a new or empty folder"
+        )
+    try:
+        written = set(orjson.loads(manifest.read_bytes())["files"])
+    except (OSError, orjson.JSONDecodeError, KeyError, TypeError):
+        raise ZendarError(
+            f"output {shown!r} holds a {MANIFEST_NAME} that cannot be read as an export's list of files, so "
+            "it is not known which files a render may replace: render into a new or empty folder"
         ) from None
     foreign = [name for name in present if name not in written and name != MANIFEST_NAME]
     foreign += sorted(  # folders the export did not make, even empty ones

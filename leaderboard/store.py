@@ -37,6 +37,8 @@ log = logging.getLogger("zendar_leaderboard")
 ROLLING_WINDOW_S = 30 * 86_400
 #: A submission whose scoring was cut short by a server stop this many times is marked failed.
 MAX_INTERRUPTIONS = 3
+#: SQLite's largest INTEGER (64-bit signed): no submission id is above it.
+MAX_SUBMISSION_ID = 2**63 - 1
 #: Seconds a write waits for another connection's write lock before it fails as unavailable.
 BUSY_TIMEOUT_S = 30.0
 #: Owner read and write only: the files hold every team's predictions, contacts and private scores.
@@ -225,18 +227,81 @@ def _read_only_uri(path: Path) -> str:
     return f"{path.resolve().as_uri()}?mode=ro"
 
 
+def _tables(path: Path) -> set[str] | None:
+    """The tables of the SQLite file ``path``, read without writing to it (None: no such file).
+
+    Raises
+    ------
+    ZendarError
+        When ``path`` is not a file or not an SQLite database.
+    """
+    if not path.exists():
+        return None
+    if not path.is_file():
+        raise ZendarError(f"database {str(path)!r} is not a file")
+    connection = sqlite3.connect(_read_only_uri(path), uri=True, timeout=BUSY_TIMEOUT_S)
+    try:
+        return {row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    except sqlite3.DatabaseError as exc:
+        if exc.sqlite_errorname != "SQLITE_NOTADB":
+            raise
+        raise ZendarError(
+            f"{str(path)!r} is not an SQLite database, so not a leaderboard database; it was left unchanged"
+        ) from None
+    finally:
+        connection.close()
+
+
+def _refuse_other_files(path: Path, *, existing: bool) -> None:
+    """Refuse, before anything is written, a file that is not a leaderboard database.
+
+    An empty file (or an SQLite database without tables) becomes one, unless ``existing`` asks for
+    a database that already is one; another program's database is never given the leaderboard's
+    tables.
+
+    Raises
+    ------
+    ZendarError
+        Naming the file; it is left as it was.
+    """
+    tables = _tables(path)
+    if tables is None:
+        if existing:
+            raise ZendarError(f"no leaderboard database at {str(path)!r}")
+        return
+    if "teams" in tables:
+        return
+    if tables:
+        shown = ", ".join(sorted(tables)[:3]) + (", ..." if len(tables) > 3 else "")
+        raise ZendarError(
+            f"{str(path)!r} is an SQLite database of something else (tables {shown}), not a leaderboard "
+            "database; it was left unchanged"
+        )
+    if existing:
+        raise ZendarError(f"{str(path)!r} is empty, not a leaderboard database; it was left unchanged")
+
+
 class Store:
     """The leaderboard's database. Safe to share between threads (a connection per thread).
 
     Parameters
     ----------
     path
-        The SQLite file; created with its tables when missing (unless ``read_only``).
+        The SQLite file; created with its tables when missing or empty (unless ``read_only`` or
+        ``existing``).
     read_only
         Open an existing database for reading only (the scorer process: only the server writes).
+    existing
+        Refuse a path that is not already a leaderboard database (missing, or an empty file)
+        instead of creating the tables: the administrator's commands on a database they name.
+
+    Raises
+    ------
+    ZendarError
+        When ``path`` is another kind of file, or another program's SQLite database (left as it was).
     """
 
-    def __init__(self, path: str | Path, *, read_only: bool = False) -> None:
+    def __init__(self, path: str | Path, *, read_only: bool = False, existing: bool = False) -> None:
         self.path = Path(path)
         self.read_only = read_only
         self._local = threading.local()
@@ -245,6 +310,7 @@ class Store:
         if read_only:
             self._connection()  # a missing or unreadable file fails here, not at the first read
         else:
+            _refuse_other_files(self.path, existing=existing)
             _create_private(self.path)
             self._connection().executescript(_SCHEMA)  # idempotent; runs in its own transaction
             self._migrate()

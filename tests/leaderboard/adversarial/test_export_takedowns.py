@@ -53,6 +53,20 @@ def test_a_folder_that_is_not_an_export_is_refused_untouched(tmp_path, capsys):
     assert (out / "index.html").read_text() == "my own page"
 
 
+@pytest.mark.parametrize("manifest", [b"{not json", b'{"generator": "zendar-leaderboard render"}', b"[1, 2]"])
+def test_an_export_whose_manifest_is_unreadable_is_refused_untouched_saying_so(tmp_path, capsys, manifest):
+    store = board_with(tmp_path, [("Radar Lab", "m", AP)])
+    out = tmp_path / "site"
+    render_site(store, out)
+    (out / MANIFEST_NAME).write_bytes(manifest)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert main(["render", "--db", str(store.path), str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"holds a {MANIFEST_NAME} that cannot be read" in err and str(out) in err
+    assert f"no {MANIFEST_NAME} in it" not in err  # it is there
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
 def test_an_export_holding_foreign_files_is_refused_untouched(tmp_path, capsys):
     store = board_with(tmp_path, [("Radar Lab", "m", AP)])
     out = tmp_path / "site"

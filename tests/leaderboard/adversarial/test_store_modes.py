@@ -34,10 +34,12 @@ def test_a_new_database_and_its_wal_and_shm_files_are_owner_only(tmp_path, open_
 
 def test_an_existing_world_readable_database_is_made_owner_only_when_opened(tmp_path, open_umask):
     path = tmp_path / "board.db"
+    Store(path).close()  # a leaderboard database (another program's is refused, untouched)
     connection = sqlite3.connect(path)
-    connection.execute("PRAGMA journal_mode=WAL")
-    connection.execute("CREATE TABLE t (x)")
+    connection.execute("INSERT INTO settings (key, value) VALUES ('k', 'v')")
     connection.commit()  # the connection stays open: its WAL and shm files stay on disk
+    for file in tmp_path.iterdir():
+        file.chmod(0o644)
     assert modes(path) == {"board.db": 0o644, "board.db-shm": 0o644, "board.db-wal": 0o644}
     Store(path)
     assert modes(path) == {"board.db": 0o600, "board.db-shm": 0o600, "board.db-wal": 0o600}
