@@ -17,7 +17,7 @@ from typing import Any
 
 import orjson
 
-from zendar_dataset.eval.validation import iter_frame_set_problems, read_predictions
+from zendar_dataset.eval.validation import duplicate_key_problems, iter_frame_set_problems, read_predictions
 from zendar_leaderboard.meta import clean_meta, meta_problems
 
 #: Default limit on a submission's size (a 100,000-frame test split takes about 20 MB). Checking an
@@ -156,6 +156,8 @@ def check_submission(
             sha256=sha256,
         )
     problems = [] if "meta" in document else ["submission: missing 'meta' (the method's description)"]
+    # A frame id given twice would otherwise lose its first detections without a word.
+    problems += duplicate_key_problems(body, document, what="submission")
     if "meta" in document:
         problems += meta_problems(document["meta"])  # a few at most: one per meta field
     checked = read_predictions(document, max_problems=max_problems)

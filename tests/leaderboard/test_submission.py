@@ -26,6 +26,17 @@ def test_a_valid_submission_passes_and_keeps_only_known_meta():
     assert "favourite_colour" not in checked.meta and checked.meta["method"] == "noisy oracle"
 
 
+def test_a_frame_id_given_twice_is_a_problem_not_a_silent_loss():
+    gt = ground_truth()
+    document = submission(gt)
+    first = next(iter(document["results"]))
+    text = json.dumps(document)
+    doubled = text[:-2] + f', "{first}": []' + text[-2:]  # the same frame again, empty, at the end of results
+    checked = check_submission(doubled.encode(), list(gt["frames"]))
+    assert not checked.ok
+    assert any(first in problem and "2 times" in problem for problem in checked.problems), checked.problems
+
+
 def test_every_meta_problem_is_listed_at_once():
     gt = ground_truth()
     document = submission(gt)

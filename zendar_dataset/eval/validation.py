@@ -230,7 +230,7 @@ def _parse(raw: bytes, named: str, what: str) -> tuple[Any, list[str]]:
 
 
 #: The member of each kind of document that maps frame ids to detections.
-_FRAMES_MEMBER = {"predictions": "results", "ground truth": "frames"}
+_FRAMES_MEMBER = {"predictions": "results", "submission": "results", "ground truth": "frames"}
 
 
 def duplicate_key_problems(raw: bytes, document: Any, *, what: str) -> list[str]:
