@@ -339,6 +339,13 @@ class Handler(BaseHTTPRequestHandler):
             return
 
     def _answer(self, answer: Answer) -> None:
+        try:
+            self._write_answer(answer)
+        except (BrokenPipeError, ConnectionResetError):
+            # The client hung up before its answer was written: nothing to tell it, nothing to log.
+            self.close_connection = True
+
+    def _write_answer(self, answer: Answer) -> None:
         self.send_response(answer.status)
         self.send_header("Content-Type", answer.content_type)
         self.send_header("Content-Length", str(len(answer.body)))

@@ -141,8 +141,8 @@ def test_an_over_long_integer_is_named_where_it_is(tmp_path, capsys):
     frames = [_frame(0, f'{{"x": {huge}, "y": 0, "score": 0.5}}'), _frame(1), _frame(2, f'{{"x": 1, "y": -{huge}, "score": 0.5}}'), _frame(3)]
     status, out, err = _run(tmp_path, capsys, _predictions_text(frames))
     assert status == 2 and "Exceeds the limit" not in err
-    assert "predictions frame 's/0' detection 0: 'x' is too large for a float (an integer of 4,301 digits)" in err
-    assert "predictions frame 's/2' detection 0: 'y' is too large for a float (an integer of 4,301 digits)" in err
+    assert "predictions frame 's/0' detection 0: 'x' holds a number that cannot be read (an integer of 4,301 digits; the limit is 4300)" in err
+    assert "predictions frame 's/2' detection 0: 'y' holds a number that cannot be read (an integer of 4,301 digits; the limit is 4300)" in err
 
 
 def test_no_warning_on_valid_files(tmp_path, capsys):

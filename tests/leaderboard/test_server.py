@@ -354,3 +354,17 @@ def test_a_scorer_that_dies_fails_its_submission_and_a_fresh_one_takes_the_next(
         assert server.store.submission(first).status == "failed"  # failures are final, never retried
     finally:
         server.stop()
+
+
+@pytest.mark.parametrize("error", [BrokenPipeError, ConnectionResetError])
+def test_a_client_that_hangs_up_before_its_answer_is_not_a_server_error(board, monkeypatch, error):
+    from zendar_leaderboard.server import Handler
+
+    def hung_up(self, answer):
+        raise error(32, "the client hung up")
+
+    errors = []
+    monkeypatch.setattr(Handler, "_write_answer", hung_up)
+    monkeypatch.setattr(board.http, "handle_error", lambda request, address: errors.append(address))
+    answer = raw_exchange(board.url, b"GET /api/ranking HTTP/1.1\r\nHost: x\r\n\r\n", read_timeout_s=5.0)
+    assert answer == b"" and errors == []

@@ -13,6 +13,7 @@ import json
 import math
 import os
 import re
+import sys
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from itertools import chain
@@ -365,7 +366,7 @@ def _short(value: Any) -> str:
 def _number_problem(value: Any) -> str | None:
     """Why ``value`` is not a finite JSON number, or None when it is one."""
     if isinstance(value, _LongInteger):
-        return f"is too large for a float (an integer of {value.digits:,} digits)"
+        return f"holds a number that cannot be read (an integer of {value.digits:,} digits; the limit is {sys.get_int_max_str_digits()})"
     if not _is_number_type(type(value)):  # bool is a subclass of int and is refused here
         return f"must be a number, got {_type_name(value)} {_short(value)}"
     try:
