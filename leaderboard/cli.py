@@ -21,6 +21,10 @@ from zendar_dataset.cli.interrupt import console_script
 from zendar_dataset.errors import ZendarError
 
 EXIT_ENVIRONMENT = 1
+# Bounds the OS can honour: a timeout near 1e308 s overflows (the scheduler's queue and the socket
+# timeouts), and a week is longer than any wait helps; the address-space limit is a C long of bytes.
+MAX_WAIT_S = 7 * 24 * 3600
+MAX_MEMORY_MB = 8 * 2**20  # 8 TiB
 
 
 def _existing_store(db: str):
@@ -233,15 +237,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quota", type=whole_number("--quota", 1), default=3,
                    help="scored submissions per team per rolling 30 days (default 3)")
     p.add_argument("--max-bytes", type=max_bytes, default=DEFAULT_MAX_BYTES, help=f"largest upload (default {DEFAULT_MAX_BYTES:,})")
-    p.add_argument("--upload-deadline-s", type=positive_number("--upload-deadline-s"), default=None,
+    p.add_argument("--upload-deadline-s", type=positive_number("--upload-deadline-s", MAX_WAIT_S), default=None,
                    help="time to send a whole upload (default: 10 s + --max-bytes at 250 kB/s)")
     p.add_argument("--max-connections", type=whole_number("--max-connections", 1), default=512,
                    help="open connections in all (default 512)")
     p.add_argument("--max-connections-per-address", type=whole_number("--max-connections-per-address", 1), default=64,
                    help="open connections per client address (default 64)")
-    p.add_argument("--time-limit-s", type=positive_number("--time-limit-s"), default=600.0,
+    p.add_argument("--time-limit-s", type=positive_number("--time-limit-s", MAX_WAIT_S), default=600.0,
                    help="scoring time per submission (default 600)")
-    p.add_argument("--memory-mb", type=whole_number("--memory-mb", 1), default=4096,
+    p.add_argument("--memory-mb", type=whole_number("--memory-mb", 1, MAX_MEMORY_MB), default=4096,
                    help="address-space limit of the scorer (default 4096)")
     p.add_argument("--bootstrap", type=whole_number("--bootstrap", 0, MAX_BOOTSTRAP_RESAMPLES), default=200,
                    help="scene resamples for the intervals (default 200)")
@@ -263,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     tokens.add_argument("--token", default=None,
                         help=f"the team's token (visible to other users of this machine; prefer --token-file or {TOKEN_VARIABLE})")
     p.add_argument("--no-wait", action="store_true", help="return once queued")
-    p.add_argument("--timeout-s", type=positive_number("--timeout-s"), default=3600.0,
+    p.add_argument("--timeout-s", type=positive_number("--timeout-s", MAX_WAIT_S), default=3600.0,
                    help="give up waiting after this long (default 3600)")
     p.set_defaults(func=_submit)
 

@@ -63,14 +63,17 @@ def whole_number(option: str, minimum: int, maximum: int | None = None) -> Calla
     return check
 
 
-def positive_number(option: str) -> Callable[[str], float]:
-    """A ``type=`` for a finite number option above 0 (a time limit): ``--time-limit-s must be positive, got 0.0``,
-    ``--time-limit-s must be a finite number, got inf``."""
+def positive_number(option: str, maximum: float | None = None) -> Callable[[str], float]:
+    """A ``type=`` for a finite number option above 0 (a time limit), up to ``maximum`` when given:
+    ``--time-limit-s must be positive, got 0.0``, ``--time-limit-s must be a finite number, got inf``,
+    ``--time-limit-s must be at most 604,800, got 1e+308`` (a timeout the OS cannot wait for)."""
 
     def check(text: str) -> float:
         value = _finite(option, text)
         if value <= 0:
             raise _out_of_range(f"{option} must be positive, got {value}")
+        if maximum is not None and value > maximum:
+            raise _out_of_range(f"{option} must be at most {maximum:,}, got {text.strip()}")
         return value
 
     return check

@@ -71,7 +71,17 @@ def test_a_scoring_time_limit_that_is_not_a_positive_finite_number_is_refused(ca
     assert "--time-limit-s must be" in err
 
 
-@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf"])
+@pytest.mark.parametrize("option, value, says", [
+    ("--time-limit-s", "1e308", "--time-limit-s must be at most 604,800, got 1e308"),
+    ("--upload-deadline-s", "1e12", "--upload-deadline-s must be at most 604,800, got 1e12"),
+    ("--memory-mb", str(2**60), f"--memory-mb must be between 1 and 8,388,608, got {2**60}"),
+])
+def test_a_serve_limit_beyond_what_the_os_can_honour_is_refused(capsys, option, value, says):
+    # 1e308 s overflows the scheduler's queue timeout and the socket timeout; 2**60 MB the address-space limit.
+    assert says in refused_by_parsing(capsys, "serve", "--gt", "gt.json", "--db", "board.db", f"{option}={value}")
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "inf", "1e308"])
 def test_a_submit_timeout_that_is_not_a_positive_finite_number_is_refused_before_the_upload(
     tmp_path, gt_file, capsys, nothing_sent, value
 ):
