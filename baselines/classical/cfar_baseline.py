@@ -79,6 +79,8 @@ def scene_predictions(reader: SceneReader, params: ChainParams) -> Detections:
     chain does not run on it)."""
     misfits = cfar_misfits(reader)
     if len(misfits) == len(reader.sensors("radar")):
+        if not reader.sensors("sar"):
+            return {}  # a scene's frames are its first SAR stream's: without one it has none
         return {frame_id(reader.scene_id, frame_ns): [] for frame_ns in frame_timestamps(reader).tolist()}
     poses = reader.ego_poses()
 

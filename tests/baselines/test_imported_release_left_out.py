@@ -95,3 +95,18 @@ def test_automatic_labels_of_a_scene_without_cubes_say_why(tmp_path):
     data = _import(tmp_path, {"bare-train": ("train", None)})
     with pytest.raises(ZendarError, match="scene bare-train: no radar to label automatically: no range-Doppler cubes"):
         write_auto_labels(open_dataset(data), ["bare-train"], tmp_path / "labels", quality=False)
+
+
+def test_a_test_scene_without_radar_or_sar_is_left_out_of_the_cfar_predictions(tmp_path):
+    from tests.release.fixture import T0_S
+    from tests.release.test_import_into_out import _tracklog_scene
+    from zendar_dataset.cli.data import main
+
+    data = _import(tmp_path, {"drive-test": ("test", (64, 32, 4))})
+    _tracklog_scene(tmp_path / "release" / "poses" / "2020-02-04_1000" / "001", T0_S)  # format v1 allows a scene of poses only
+    assert main(["import-release", str(tmp_path / "release" / "poses"), str(data), "--split", "test"]) == 0
+    results = _bench(data, tmp_path / "out")
+    cfar = results["rows"][0]
+    assert cfar["key"] == "cfar" and cfar["done"] == f"predictions of the {len(TIMES_S)} test frames"
+    left_out = [entry["what"] for entry in results["skipped"] if entry["what"].startswith("CFAR predictions")]
+    assert left_out == ["CFAR predictions: scene 2020-02-04_1000_001"]

@@ -150,3 +150,18 @@ def test_no_warning_on_valid_files(tmp_path, capsys):
         warnings.simplefilter("error")
         status, out, _ = _run(tmp_path, capsys, _predictions_text([_frame(k) for k in range(4)]))
     assert status == 0 and "method: m" in out
+
+
+def test_a_repeat_nested_deeper_than_pythons_parser_reads_is_a_problem_not_a_crash(tmp_path, capsys):
+    depth = 1000  # orjson reads it; Python's json, which names repeats, runs out of recursion
+    text = _predictions_text([_frame(k) for k in range(4)])[:-1] + ', "x": ' + "[" * depth + "]" * depth + ', "x": 1}'
+    status, _, err = _run(tmp_path, capsys, text)
+    assert status == 2 and "Traceback" not in err and "a bug" not in err
+    assert "given more than once" in err
+
+
+def test_meta_from_python_may_hold_tuples_and_number_keys_as_json_writes_them():
+    predictions = {"meta": {"method": "m", "tags": ("a", "b"), "by_epoch": {1: 0.5}},
+                   "results": {f"s/{k}": [{"x": 20.0 + k, "y": 0.0, "score": 0.9}] for k in range(4)}}
+    metrics = evaluate(predictions, GT)
+    assert metrics["ap"]["all"] == pytest.approx(1.0) and list(metrics["meta"]["tags"]) == ["a", "b"]

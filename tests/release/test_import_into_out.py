@@ -222,3 +222,33 @@ def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
     status, _, err = _import(capsys, src, out)
     assert status == 2 and "OUT is a file" in err
     assert out.read_text() == "mine"
+
+
+def test_sides_of_serials_named_only_by_their_streams_resume_too(tmp_path, capsys):
+    src = tmp_path / "release"
+    build_release(src, "2020")
+    scene = src / "2020-02-03_2252" / "001"
+    serials = sorted(p.name.split("_")[0] for p in scene.glob("*_images.pbs"))
+    for serial in serials:  # images named by the serial alone, no detections
+        (scene / f"{serial}_images.pbs").rename(scene / f"{serial}.pbs")
+        (scene / f"{serial}_points.pbs").unlink(missing_ok=True)
+    sides = f"--sides={serials[0]}=left,{serials[1]}=right"
+    for _ in range(2):
+        status, stdout, err = _import(capsys, src, tmp_path / "out", sides)
+        assert status == 0, err
+    assert "(already imported)" in stdout
+
+
+def test_a_scene_id_that_cannot_name_a_store_is_refused_before_out_exists(tmp_path, capsys):
+    src = tmp_path / "release"
+    _tracklog_scene(src / "2020-02-21_0900" / "001", T0_S)
+    status, _, err = _import(capsys, src, tmp_path / "out", "--scene-id", "a/b")
+    assert status == 2 and "a/b" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_split_name_with_a_trailing_newline_is_refused(tmp_path, capsys):
+    src = tmp_path / "release"
+    _tracklog_scene(src / "2020-02-21_0900" / "001", T0_S)
+    status, _, err = _import(capsys, src, tmp_path / "out", "--split", "val\n")
+    assert status == 2 and "--split" in err

@@ -324,8 +324,11 @@ def _object_of_pairs(pairs: list[tuple[str, Any]]) -> _Object:
 
 def _repeated_key_problems(raw: bytes, what: str) -> list[str]:
     """The exact pass of :func:`duplicate_key_problems`: ``raw`` parsed again, every repeat named."""
-    with _collector_paused():
-        document = json.loads(raw, object_pairs_hook=_object_of_pairs, parse_int=_parse_int)
+    try:
+        with _collector_paused():
+            document = json.loads(raw, object_pairs_hook=_object_of_pairs, parse_int=_parse_int)
+    except RecursionError:  # orjson read deeper than Python's parser can: the repeats cannot be named
+        return [f"{what}: a key is given more than once in an object nested too deeply to name it"]
     problems = []
     stack: list[tuple[tuple[str | int, ...], Any]] = [((), document)]
     while stack:
@@ -416,11 +419,13 @@ def _meta_problems(meta: dict) -> list[str]:
         path, value = stack.pop()
         if isinstance(value, dict):
             for key in value:
-                reason = _text_problem(key) if isinstance(key, str) else "is not a string"
+                # json.dumps writes numbers, booleans and None as keys too (as text), as metrics.json does.
+                reason = _text_problem(key) if isinstance(key, str) else (
+                    None if key is None or isinstance(key, (bool, int, float)) and math.isfinite(key) else "is not a string")
                 if reason:
                     problems.append(f"predictions: a key of {path!r} ({_short(key)}) {reason}")
             stack.extend((f"{path}.{key}", item) for key, item in reversed(value.items()))
-        elif isinstance(value, list):
+        elif isinstance(value, (list, tuple)):  # a tuple is written as a JSON array
             stack.extend((f"{path}[{index}]", item) for index, item in reversed(list(enumerate(value))))
         else:
             reason = _meta_value_problem(value)

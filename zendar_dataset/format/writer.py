@@ -52,7 +52,9 @@ SMALL_CHUNK_ROWS = 65536
 _QUATERNION_NORM_TOLERANCE = 1e-6
 
 
-def _check_scene_id(scene_id: Any) -> str:
+def check_scene_id(scene_id: Any) -> str:
+    """``scene_id`` when it can name a scene's store (a non-empty string without ``/``, not starting
+    with ``.``); else :class:`ZendarFormatError`."""
     if not isinstance(scene_id, str) or not scene_id or "/" in scene_id or scene_id.startswith("."):
         raise ZendarFormatError(
             f"scene_id: expected a non-empty string without '/' and not starting with '.', found {scene_id!r}"
@@ -139,7 +141,7 @@ class SceneWriter:
         overwrite: bool = False,
     ) -> None:
         self.path = pathlib.Path(path)
-        self.scene_id = _check_scene_id(scene_id)
+        self.scene_id = check_scene_id(scene_id)
         self.backend = backend or stores.backend_from_path(self.path)
         if self.backend not in stores.BACKENDS:
             raise ValueError(f"unknown backend {self.backend!r}; expected one of {stores.BACKENDS}")
@@ -624,7 +626,7 @@ class DatasetWriter:
 
     def scene_path(self, scene_id: str) -> pathlib.Path:
         """``root/scenes/<scene_id>.zarr`` or ``.h5``."""
-        return self.root / "scenes" / f"{_check_scene_id(scene_id)}{BACKEND_SUFFIX[self.backend]}"
+        return self.root / "scenes" / f"{check_scene_id(scene_id)}{BACKEND_SUFFIX[self.backend]}"
 
     def scene(self, scene_id: str, **kwargs: Any) -> SceneWriter:
         """A :class:`SceneWriter` for ``scene_id`` at :meth:`scene_path` (kwargs go to it)."""
@@ -652,7 +654,7 @@ class DatasetWriter:
         suffix = BACKEND_SUFFIX[self.backend]
 
         def relative_path(scene_id: str) -> str:
-            return known.get(scene_id, f"scenes/{_check_scene_id(scene_id)}{suffix}")
+            return known.get(scene_id, f"scenes/{check_scene_id(scene_id)}{suffix}")
 
         problems = []
         for split, scene_ids in splits.items():

@@ -25,7 +25,7 @@ from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format import stores
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, SPLITS
-from zendar_dataset.format.writer import DatasetWriter
+from zendar_dataset.format.writer import DatasetWriter, check_scene_id
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
@@ -575,7 +575,8 @@ def _check_stated_sides(stated: Mapping[str, str], imports: list[_SceneImport], 
     if twice:
         problems.append(f"--sides: one side is given to more than one serial ({stated})")
     known = set().union(*(job.radar_serials() for job in imports), *(_named_serials(s.files) for s in scenes))
-    unknown = sorted(set(stated) - known)
+    # With every scene imported already there is nothing to state sides for: the command run again resumes.
+    unknown = sorted(set(stated) - known) if imports else []
     if unknown:
         problems.append(
             f"--sides: {', '.join(unknown)} is not a radar serial of the scenes to import "
@@ -630,7 +631,7 @@ def import_release(
     src_path, out_path = pathlib.Path(src), pathlib.Path(out)
     if not src_path.exists():
         raise ZendarError(f"{src_path}: no such release folder or file")
-    if not _SPLIT_NAME.match(split):
+    if not _SPLIT_NAME.fullmatch(split):
         raise ZendarError(f"--split: expected a split name of letters, digits, '_' or '-' (e.g. {', '.join(SPLITS)}), got {split!r}")
     resolved_src, resolved_out = src_path.resolve(), out_path.resolve()
     if resolved_out == resolved_src or (src_path.is_dir() and resolved_src in resolved_out.parents):
@@ -643,7 +644,7 @@ def import_release(
         if len(scenes) != 1:
             names = ", ".join(s.scene_id for s in scenes)
             raise ZendarError(f"--scene-id: {src_path} holds {len(scenes)} scenes ({names}); give it for one scene only")
-        scenes[0].scene_id = scene_id
+        scenes[0].scene_id = check_scene_id(scene_id)
     earlier = _EarlierDataset(out_path)
     summary = ImportSummary(str(src_path), str(out_path))
     absolute_src = pathlib.Path(os.path.abspath(src_path))  # as find_scenes names the files

@@ -64,8 +64,8 @@ def read_ahead(records: Iterator[T], depth: int = READ_AHEAD_RECORDS) -> Iterato
                 close()
 
     thread = threading.Thread(target=produce, name="zendar-read-ahead", daemon=True)
-    thread.start()
     try:
+        thread.start()  # inside: a Ctrl-C right after it still stops the thread
         while True:
             item, error = waiting.get()
             if error is not None:
@@ -75,4 +75,5 @@ def read_ahead(records: Iterator[T], depth: int = READ_AHEAD_RECORDS) -> Iterato
             yield item
     finally:
         stop.set()
-        thread.join()
+        if thread.ident is not None:
+            thread.join()
