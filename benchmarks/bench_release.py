@@ -15,7 +15,9 @@ read) and the import's seconds by step (decode, and inside the format writer its
 checks and copies, checksums, array writes and metadata) are printed too, to
 show where the time goes.
 
-Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR]``. The machine may be
+Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR] [--variants]``
+(``--variants``: the import against itself with zstd level 3 for whole arrays and/or without the
+read-ahead, the two choices that made it faster, alternating in one process). The machine may be
 shared: give enough repeats, and read the best (min) figures beside the medians.
 """
 
@@ -257,12 +259,60 @@ class WriterClock:
             setattr(owner, name, method)
 
 
+def compare_variants(sar_frames: int, repeats: int) -> None:
+    """The import as it is, and with the two choices that made it faster undone one at a time: zstd level 3
+    (the level before) for the format's whole arrays, and the records decoded in line instead of read ahead
+    on a second thread. Alternating run by run, in this process, on the same release."""
+    from zarr.codecs import ZstdCodec
+
+    from zendar_dataset.format import stores
+    from zendar_dataset.release import importer
+
+    print(f"load average before: {os.getloadavg()}")
+    work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
+    current = (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead)
+    variants = {
+        "as it is": current,
+        "zstd level 3": ((ZstdCodec(level=3),), current[1]),
+        "no read-ahead": (current[0], lambda records: records),
+        "both undone": ((ZstdCodec(level=3),), lambda records: records),
+    }
+    try:
+        src = work / "release"
+        size = write_release(src, sar_frames, np.random.default_rng(0))
+        print(f"release: {size / 1e6:.1f} MB in {len(list(src.rglob('*.pbs')))} streams")
+        import_release(src, work / "warm", log=None)
+        shutil.rmtree(work / "warm")
+        times: dict[str, list[float]] = {name: [] for name in variants}
+        for _ in range(repeats):
+            for name, (codec, read_ahead) in variants.items():
+                stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead = codec, read_ahead
+                out = work / "out"
+                start = time.perf_counter()
+                import_release(src, out, log=None)
+                times[name].append(time.perf_counter() - start)
+                shutil.rmtree(out)
+        for name, seconds in times.items():
+            print(f"{name:<14} median {statistics.median(seconds):.3f} s, best {min(seconds):.3f} s "
+                  f"({size / 1e6 / statistics.median(seconds):.0f} MB/s median; of {len(seconds)})")
+    finally:
+        stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead = current
+        shutil.rmtree(work, ignore_errors=True)
+        print(f"load average after: {os.getloadavg()}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sar-frames", type=int, default=40, help="SAR frames per radar (default 40)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--keep", type=pathlib.Path, default=None, help="write the release here and keep it")
+    parser.add_argument("--variants", action="store_true",
+                        help="instead: the import as it is against it with zstd level 3 for whole arrays and/or "
+                             "without the read-ahead, alternating in one process")
     args = parser.parse_args()
+    if args.variants:
+        compare_variants(args.sar_frames, args.repeats)
+        return
     print(f"load average before: {os.getloadavg()}")
     work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
     src = args.keep or work / "release"
