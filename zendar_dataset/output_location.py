@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import os
 import pathlib
+from collections.abc import Callable
 
 from zendar_dataset.errors import ZendarError
+
+#: Entries an output folder's refusal names before "and N more".
+NAMED_ENTRIES = 5
 
 
 def _is_url(location: str | os.PathLike) -> bool:
@@ -63,3 +67,17 @@ def refuse_output_inside(
 
 
 __all__ = ["refuse_output_inside"]
+
+
+def other_entries(folder: pathlib.Path, own: Callable[[pathlib.Path], bool] = lambda entry: False) -> str | None:
+    """The entries of the folder ``folder`` that ``own`` does not claim, named for a refusal
+    (``"a.txt, b, c and 3 more"``, sorted), or None when there are none.
+
+    A command that writes into a folder it may find non-empty (a resume) refuses one holding anything
+    else: what it would overwrite or mix with is the user's.
+    """
+    names = sorted(entry.name for entry in folder.iterdir() if not own(entry))
+    if not names:
+        return None
+    more = len(names) - NAMED_ENTRIES
+    return ", ".join(names[:NAMED_ENTRIES]) + (f" and {more} more" if more > 0 else "")

@@ -24,7 +24,7 @@ from zendar_dataset.atomic_files import write_json_atomic
 from zendar_dataset.cluster import DaskCluster, refuse_url_output
 from zendar_dataset.errors import ZendarError
 from zendar_dataset.format.reader import DatasetIndex, SceneReader
-from zendar_dataset.output_location import refuse_output_inside
+from zendar_dataset.output_location import other_entries, refuse_output_inside
 from zendar_dataset.radar import FmcwParams, range_axis_m
 from zendar_dataset.sar.frames import SarFrames
 from zendar_dataset.temporary_files import owner_pid
@@ -38,7 +38,6 @@ from zendar_baselines.labels.masks import MaskParams, scene_masks
 from zendar_baselines.labels.quality import QUALITY_REFERENCE, combine_quality, format_quality, mask_quality
 
 QUALITY_FILE = "quality.json"
-_FOREIGN_SHOWN = 5
 
 
 def _range_m(reader: SceneReader, radar: str, masks: np.ndarray) -> np.ndarray:
@@ -229,11 +228,9 @@ def refuse_foreign_out(out_dir: Path, dataset: DatasetIndex | str | os.PathLike)
         raise ZendarError(f"--out {out_dir}: exists and is not a directory")
     if not out_dir.is_dir():
         return
-    foreign = sorted(entry.name for entry in out_dir.iterdir() if not _own_output(entry))
+    foreign = other_entries(out_dir, _own_output)
     if foreign:
-        shown = ", ".join(foreign[:_FOREIGN_SHOWN]) + (f" and {len(foreign) - _FOREIGN_SHOWN} more"
-                                                       if len(foreign) > _FOREIGN_SHOWN else "")
-        raise ZendarError(f"--out {out_dir} holds files that zendar-bench autolabels did not write ({shown}); choose "
+        raise ZendarError(f"--out {out_dir} holds files that zendar-bench autolabels did not write ({foreign}); choose "
                           "a new or empty directory, or one it wrote (nothing was changed)")
 
 

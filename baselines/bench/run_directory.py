@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from zendar_dataset.errors import ZendarError
+from zendar_dataset.output_location import other_entries
 from zendar_dataset.atomic_files import prepare_out_dir, write_json_atomic
 
 from zendar_baselines.fingerprints import canonical_json_sha256
@@ -95,11 +96,10 @@ class RunDirectory:
             if not isinstance(recorded, dict) or recorded.get("format") != RUN_FORMAT:
                 raise ZendarError(f"{marker}: not a zendar-bench run record; choose another --out")
             return recorded
-        if path.is_dir() and any(path.iterdir()):
-            names = sorted(entry.name for entry in path.iterdir())
-            shown = ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        found = other_entries(path) if path.is_dir() else None
+        if found:
             raise ZendarError(
-                f"--out {path} holds files that zendar-bench did not write ({shown}); "
+                f"--out {path} holds files that zendar-bench did not write ({found}); "
                 "choose an empty or new directory (nothing was changed)"
             )
         return None

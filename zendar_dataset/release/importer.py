@@ -26,6 +26,7 @@ from zendar_dataset.errors import ZendarError, ZendarFormatError
 from zendar_dataset.format import stores
 from zendar_dataset.format.schema import BACKEND_SUFFIX, DATASET_JSON, SPLITS
 from zendar_dataset.format.writer import DatasetWriter, check_scene_id
+from zendar_dataset.output_location import other_entries
 from zendar_dataset.geometry.geodesy import LocalENU
 from zendar_dataset.release import assumptions as assume
 from zendar_dataset.release import records as rec
@@ -516,9 +517,8 @@ def _check_out(out: pathlib.Path) -> None:
     if not out.is_dir() or not any(out.iterdir()):
         return
     if not (out / DATASET_JSON).is_file() and not (out / "scenes").is_dir():
-        found = sorted(p.name for p in out.iterdir())
         raise ZendarError(
-            f"{out}: OUT holds files that are not a dataset ({', '.join(found[:5])}{' …' if len(found) > 5 else ''}); "
+            f"{out}: OUT holds files that are not a dataset ({other_entries(out)}); "
             "give a new or empty folder, or a dataset to add to"
         )
     summary = out / SUMMARY_JSON
