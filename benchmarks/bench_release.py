@@ -15,10 +15,12 @@ read) and the import's seconds by step (decode, and inside the format writer its
 checks and copies, checksums, array writes and metadata) are printed too, to
 show where the time goes.
 
-Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR] [--variants]``
+Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR] [--variants] [--against SRC]``
 (``--variants``: the import against itself with zstd level 3 for whole arrays and/or without the
-read-ahead, the two choices that made it faster, alternating in one process). The machine may be
-shared: give enough repeats, and read the best (min) figures beside the medians.
+read-ahead, two choices that made it faster, alternating in one process; ``--against SRC``: the import
+of this checkout against that of another checkout of the package at ``SRC`` — e.g. a ``git worktree``
+of an earlier commit — each in a process of its own, alternating, on the same release). The machine
+may be shared: give enough repeats, and read the best (min) figures beside the medians.
 """
 
 from __future__ import annotations
@@ -301,6 +303,53 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
         print(f"load average after: {os.getloadavg()}")
 
 
+# Run in a fresh process for --against: imports SRC's release into OUT twice (the first warms the numba
+# cache and the page cache) and prints the second's seconds.
+_TIMED_IMPORT = """
+import shutil, sys, time
+from zendar_dataset.release import import_release
+src, out = sys.argv[1:3]
+import_release(src, out, log=None)
+shutil.rmtree(out)
+start = time.perf_counter()
+import_release(src, out, log=None)
+print(time.perf_counter() - start)
+shutil.rmtree(out)
+"""
+
+
+def compare_checkouts(sar_frames: int, repeats: int, other: pathlib.Path) -> None:
+    """The import of this checkout against that of the package checked out at ``other``, alternating,
+    each timed in a process of its own (``PYTHONPATH`` puts the checkout first)."""
+    import subprocess
+    import sys
+
+    if not (other / "zendar_dataset" / "__init__.py").is_file():
+        raise SystemExit(f"--against {other}: expected a checkout of the package (zendar_dataset/ in it)")
+    here = pathlib.Path(__file__).resolve().parents[1]
+    print(f"load average before: {os.getloadavg()}")
+    work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
+    try:
+        src = work / "release"
+        size = write_release(src, sar_frames, np.random.default_rng(0))
+        print(f"release: {size / 1e6:.1f} MB in {len(list(src.rglob('*.pbs')))} streams")
+        times: dict[str, list[float]] = {"this checkout": [], str(other): []}
+        for _ in range(repeats):
+            for name, checkout in (("this checkout", here), (str(other), other)):
+                env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(checkout), os.environ.get("PYTHONPATH", "")])}
+                done = subprocess.run([sys.executable, "-c", _TIMED_IMPORT, str(src), str(work / "out")],
+                                      env=env, capture_output=True, text=True, check=True)
+                times[name].append(float(done.stdout.split()[-1]))
+        for name, seconds in times.items():
+            print(f"{name:<14} median {statistics.median(seconds):.3f} s, best {min(seconds):.3f} s "
+                  f"({size / 1e6 / statistics.median(seconds):.0f} MB/s median; of {len(seconds)})")
+        ratio = statistics.median(times[str(other)]) / statistics.median(times["this checkout"])
+        print(f"this checkout is {ratio:.2f}x as fast (medians)")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        print(f"load average after: {os.getloadavg()}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sar-frames", type=int, default=40, help="SAR frames per radar (default 40)")
@@ -309,7 +358,12 @@ def main() -> None:
     parser.add_argument("--variants", action="store_true",
                         help="instead: the import as it is against it with zstd level 3 for whole arrays and/or "
                              "without the read-ahead, alternating in one process")
+    parser.add_argument("--against", type=pathlib.Path, default=None, metavar="SRC",
+                        help="instead: this checkout's import against that of the checkout at SRC, alternating")
     args = parser.parse_args()
+    if args.against is not None:
+        compare_checkouts(args.sar_frames, args.repeats, args.against.resolve())
+        return
     if args.variants:
         compare_variants(args.sar_frames, args.repeats)
         return

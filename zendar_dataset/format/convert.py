@@ -30,16 +30,6 @@ _TO = {"zarr": "zarr", "hdf5": "hdf5", "h5": "hdf5"}
 _COPY_BLOCK_BYTES = 64 * 2**20
 
 
-def _kind(path: str) -> str:
-    group, _, rest = path.partition("/")
-    name = rest.rsplit("/", 1)[-1]
-    if (group, name) in (("radar", "cube"), ("sar", "image")):
-        return stores.RAW
-    if (group, name) in (("camera", "image"), ("lidar", "points")):
-        return stores.FAST
-    return stores.SMALL
-
-
 def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bool) -> None:
     """Copy one array chunk-aligned block by block, recomputing its chunk checksums.
 
@@ -54,7 +44,7 @@ def _copy_array(source: Any, target_root: Any, path: str, scene: str, verify: bo
         shape=shape,
         dtype=np.dtype(source.dtype),
         chunks=chunks,
-        kind=_kind(path),
+        kind=stores.array_kind(path),
         resizable=len(shape) > 0,
     )
     attrs = stores.read_attrs(source)

@@ -48,6 +48,9 @@ from zendar_dataset.format.schema import (
 )
 
 LIDAR_CHUNK_ROWS = 65536
+# Lidar rows are buffered up to 16 chunks (16 MiB) per write: each write resizes the array (a metadata
+# rewrite) and zarr compresses the chunks of one write concurrently.
+_LIDAR_FLUSH_ROWS = 16 * LIDAR_CHUNK_ROWS
 SMALL_CHUNK_ROWS = 65536
 _QUATERNION_NORM_TOLERANCE = 1e-6
 
@@ -356,7 +359,7 @@ class SceneWriter:
         stream.offsets.append(stream.offsets[-1] + points.shape[0])
         stream.pending_points.append(points)
         stream.pending_rows += points.shape[0]
-        if stream.pending_rows >= LIDAR_CHUNK_ROWS:
+        if stream.pending_rows >= _LIDAR_FLUSH_ROWS:
             self._flush_points(stream, final=False)
 
     def _flush_points(self, stream: _Stream, *, final: bool) -> None:
@@ -502,11 +505,13 @@ class SceneWriter:
         stores.write_attrs(root.require_group(path) if path else root, attrs)
 
     def _write_small(self, path: str, array: np.ndarray) -> None:
-        """Queue a whole small array (with its chunk checksums) for :meth:`_flush_small` (zarr)."""
+        """Queue a whole array (with its chunk checksums; compressed as :func:`stores.array_kind` says) for
+        :meth:`_flush_small` (zarr)."""
         rows = max(1, min(array.shape[0], SMALL_CHUNK_ROWS))
         chunks = (rows, *array.shape[1:])
         crc32c = checksums.encode(checksums.block_checksums(array, chunks))
-        self._pending_small.append(stores.NewArray(path, array, chunks, stores.SMALL, {checksums.ARRAY_ATTR: crc32c}))
+        kind = stores.array_kind(path)
+        self._pending_small.append(stores.NewArray(path, array, chunks, kind, {checksums.ARRAY_ATTR: crc32c}))
         if self.backend != "zarr":
             self._flush_small()  # HDF5 gains nothing from a batch: keep its file's order of writes
 

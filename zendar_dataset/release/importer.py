@@ -50,6 +50,27 @@ def _sar_frames(opened: OpenedStream, probe: bool = False) -> Iterator[rec.SarFr
     yield from decoded_records(opened, rec.sar_frame_record, probe=probe)
 
 
+def _sar_grids(opened: OpenedStream, i_fastest: bool) -> Iterator[tuple[rec.SarFrame, tuple[np.ndarray, str] | ValueError]]:
+    """Each SAR frame with its image in C order and what it holds (:func:`records.sar_grid`), or the
+    ValueError that says why it has none. The copy into C order (a transpose when ``i_fastest``) is made
+    here so that, under :func:`read_ahead`, it runs on the decoding thread (numpy copies release the GIL)."""
+    for frame in _sar_frames(opened):
+        try:
+            image, holds = rec.sar_grid(frame, i_fastest)
+        except ValueError as exc:
+            yield frame, exc
+            continue
+        yield frame, (np.ascontiguousarray(image), holds)
+
+
+def _finite_rows(*points: np.ndarray) -> np.ndarray | None:
+    """``[P]`` bool: the rows finite in every ``[P, 3]`` array; None when all are (the rule, found by
+    one pass over each array's values rather than numpy's far slower per-row reduction)."""
+    if all(np.isfinite(p).all() for p in points):
+        return None
+    return np.logical_and.reduce([np.isfinite(p).all(axis=1) for p in points])
+
+
 class _Stamps:
     """Strictly increasing int64 ns per output stream; records out of order are skipped with a reason."""
 
@@ -321,12 +342,11 @@ class _SceneImport:
         layout = None  # (holds, dtype) of the stream's first frame: format v1 keeps one image dtype per stream
         bad: dict[str, int] = {}
         shape = None
-        for frame in read_ahead(_sar_frames(opened)):
-            try:
-                image, holds = rec.sar_grid(frame, i_fastest)
-            except ValueError as exc:
-                bad[str(exc)] = bad.get(str(exc), 0) + 1
+        for frame, grid in read_ahead(_sar_grids(opened, i_fastest)):
+            if isinstance(grid, ValueError):
+                bad[str(grid)] = bad.get(str(grid), 0) + 1
                 continue
+            image, holds = grid
             if not all(np.all(np.isfinite(v)) for v in (frame.origin_ecef, frame.di_ecef, frame.dj_ecef)):
                 bad["NaN in the image model"] = bad.get("NaN in the image model", 0) + 1
                 continue
@@ -411,8 +431,8 @@ class _SceneImport:
             if local is None or rec.looks_ecef(local):
                 local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
                 points_in_enu = True
-            keep = np.isfinite(local).all(axis=1) & np.isfinite(sweep.position_ecef).all(axis=1)
-            lost = int(keep.size - np.count_nonzero(keep))
+            keep = _finite_rows(local, sweep.position_ecef)
+            lost = 0 if keep is None else int(keep.size - np.count_nonzero(keep))
             dropped += lost
             ns = stamps.take(sweep.timestamp_s)
             if ns is None:

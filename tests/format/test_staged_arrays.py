@@ -1,0 +1,124 @@
+"""Whole arrays written into a local zarr store through an in-memory stage are the files zarr itself
+writes; groups already there keep their attributes; nothing already stored is overwritten. Lidar
+points are written in batches of chunks and their ECEF positions compressed as the points are."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+import zarr
+
+from tests.format.conftest import ENU_ORIGIN, T0_NS, make_calibration
+from zendar_dataset.format import SceneWriter, stores
+from zendar_dataset.format import writer as writer_module
+from zendar_dataset.format.validate import validate_scene
+
+
+def _tree(root: pathlib.Path) -> dict[str, object]:
+    """Every file below ``root``: parsed JSON for metadata, bytes for chunks."""
+    out: dict[str, object] = {}
+    for path in sorted(root.rglob("*")):
+        if path.is_file():
+            key = str(path.relative_to(root))
+            out[key] = json.loads(path.read_bytes()) if path.name == "zarr.json" else path.read_bytes()
+    return out
+
+
+def _arrays(rng: np.random.Generator) -> list[stores.NewArray]:
+    ecef = np.array([-2_706_000.0, -4_261_000.0, 3_885_000.0]) + rng.normal(scale=20.0, size=(70_000, 3))
+    return [
+        stores.NewArray("sar/left/timestamp_ns", np.arange(5, dtype=np.int64) * 10**8, (5,), stores.SMALL, {"chunk_crc32c": "0"}),
+        stores.NewArray("sar/left/origin_ecef", rng.normal(size=(5, 3)), (5, 3), stores.SMALL, {}),
+        stores.NewArray("tracklog/attitude_wxyz", rng.normal(size=(9, 4)), (4, 4), stores.SMALL, {"note": [1, "a"]}),
+        stores.NewArray("lidar/top/position_ecef", ecef, (65_536, 3), stores.FAST, {}),
+        stores.NewArray("labels/moving_cars/x", np.zeros(0), (1,), stores.SMALL, {}),
+    ]
+
+
+def test_staged_arrays_are_the_files_zarr_writes(tmp_path):
+    staged = stores.create_store(tmp_path / "staged.zarr", "zarr")
+    reference = stores.create_store(tmp_path / "reference.zarr", "zarr")
+    stores.write_arrays(staged.root, _arrays(np.random.default_rng(5)))
+    arrays = _arrays(np.random.default_rng(5))
+    stores.fill_arrays(stores.create_arrays(reference.root, arrays), arrays)  # zarr's own path, file by file
+    written, expected = _tree(tmp_path / "staged.zarr"), _tree(tmp_path / "reference.zarr")
+    assert written.keys() == expected.keys()
+    for key in expected:
+        assert written[key] == expected[key], key
+    opened = zarr.open_group(str(tmp_path / "staged.zarr"), mode="r")
+    np.testing.assert_array_equal(opened["lidar/top/position_ecef"][...], _arrays(np.random.default_rng(5))[3].data)
+    assert opened["tracklog/attitude_wxyz"].attrs["note"] == [1, "a"]
+
+
+def test_groups_already_there_keep_their_attributes(tmp_path):
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    stores.write_attrs(store.root.require_group("sar/left"), {"serial": "1739000J1Q"})
+    stores.write_attrs(store.root, {"scene_id": "s0"})
+    stores.write_arrays(store.root, [stores.NewArray("sar/left/origin_ecef", np.ones((2, 3)), (2, 3), stores.SMALL, {})])
+    opened = zarr.open_group(str(tmp_path / "s.zarr"), mode="r")
+    assert dict(opened["sar/left"].attrs) == {"serial": "1739000J1Q"}
+    assert dict(opened.attrs) == {"scene_id": "s0"}
+    np.testing.assert_array_equal(opened["sar/left/origin_ecef"][...], np.ones((2, 3)))
+
+
+def test_an_array_already_stored_is_not_overwritten(tmp_path):
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    stores.write_arrays(store.root, [stores.NewArray("tracklog/timestamp_ns", np.arange(3), (3,), stores.SMALL, {})])
+    with pytest.raises(FileExistsError, match="tracklog"):
+        stores.write_arrays(store.root, [stores.NewArray("tracklog/timestamp_ns", np.zeros(7), (7,), stores.SMALL, {})])
+    np.testing.assert_array_equal(zarr.open_array(str(tmp_path / "s.zarr/tracklog/timestamp_ns"), mode="r")[...], np.arange(3))
+
+
+def test_a_file_where_a_chunk_folder_goes_is_an_error_naming_it(tmp_path):
+    (tmp_path / "image" / "c").mkdir(parents=True)
+    (tmp_path / "image" / "c" / "0").write_bytes(b"in the way")
+    with pytest.raises(OSError, match="image/c/0"):
+        stores.write_raw_frame(tmp_path / "image/c/0/0/0", np.zeros((2, 2), np.uint32), {tmp_path / "image"})
+
+
+def test_array_kinds():
+    assert stores.array_kind("radar/left/cube") == stores.RAW
+    assert stores.array_kind("sar/right/image") == stores.RAW
+    assert stores.array_kind("camera/front/image") == stores.FAST
+    assert stores.array_kind("lidar/top/points") == stores.FAST
+    assert stores.array_kind("lidar/top/position_ecef") == stores.FAST
+    assert stores.array_kind("lidar/top/offsets") == stores.SMALL
+    assert stores.array_kind("sar/left/origin_ecef") == stores.SMALL
+
+
+@pytest.mark.parametrize("suffix", [".zarr", ".h5"])
+def test_lidar_points_over_many_chunks_and_their_ecef_positions(tmp_path, suffix):
+    rng = np.random.default_rng(11)
+    rows = writer_module._LIDAR_FLUSH_ROWS + 3 * writer_module.LIDAR_CHUNK_ROWS + 123  # one batch, then the rest at close
+    sizes = np.diff(np.linspace(0, rows, 9).astype(int))
+    sweeps = [rng.normal(size=(n, 4)).astype(np.float32) for n in sizes]
+    ecef = np.array([-2_706_000.0, -4_261_000.0, 3_885_000.0]) + rng.normal(size=(rows, 3))
+    path = tmp_path / f"s{suffix}"
+    with SceneWriter(path, "s0", enu_origin=ENU_ORIGIN, calibration=make_calibration()) as writer:
+        for k, sweep in enumerate(sweeps):
+            writer.append_lidar("top", T0_NS + k * 100_000_000, sweep)
+        writer.write_extra_array("lidar/top/position_ecef", ecef)
+    assert validate_scene(path, "s0") == []
+    store = stores.open_store(path)
+    try:
+        points = store.root["lidar/top/points"]
+        np.testing.assert_array_equal(points[...], np.concatenate(sweeps))
+        np.testing.assert_array_equal(store.root["lidar/top/position_ecef"][...], ecef)
+        np.testing.assert_array_equal(store.root["lidar/top/offsets"][...], np.concatenate([[0], np.cumsum(sizes)]))
+        if suffix == ".zarr":
+            assert stores.missing_chunks(points) == []
+            codecs = [type(c).__name__ for c in store.root["lidar/top/position_ecef"].metadata.codecs]
+            assert "BloscCodec" in codecs
+    finally:
+        store.close()
+
+
+def test_an_array_is_not_stored_inside_another(tmp_path):
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    stores.write_arrays(store.root, [stores.NewArray("tracklog", np.arange(3), (3,), stores.SMALL, {})])
+    with pytest.raises(FileExistsError, match="expected a group there"):
+        stores.write_arrays(store.root, [stores.NewArray("tracklog/timestamp_ns", np.arange(3), (3,), stores.SMALL, {})])
+    assert not (tmp_path / "s.zarr/tracklog/timestamp_ns").exists()  # refused before anything is written
