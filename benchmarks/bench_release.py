@@ -1,7 +1,8 @@
 """Import throughput of ``import-release`` against a plain read of the same files, in the same run.
 
 A synthetic release scene is written once (vectorised encoders, laid out as
-the fact sheet says): magnitude SAR images of two radars, range-Doppler cubes
+the fact sheet says): magnitude SAR images of two radars (bright where the
+radar's 200 detections of the frame are, as on a recording), range-Doppler cubes
 of paper size, lidar sweeps of 30 000 points, detections and a tracklog.  Then,
 alternating, (a) a plain read of every file (``read`` into one reused buffer,
 the floor for any reader), (b) a plain copy of the files into a fresh directory
@@ -136,13 +137,20 @@ def write_release(root: pathlib.Path, sar_frames: int, rng: np.random.Generator)
             t = T0_S + k / 10
             position = ORIGIN_ECEF + [0.8 * k, 0.0, 0.0]
             origin = position + [0.0, side * 5.0, 0.0]
-            pixels = rng.integers(0, 1000, size=rows * cols, dtype="<u4").tobytes()
+            pixels = rng.integers(0, 1000, size=rows * cols, dtype="<u4")
+            # The radar's own detections in the image (as on a recording, where they are its bright
+            # returns): bright pixels in the SDK viewer's order (flat j·rows + i), the detections at their
+            # ECEF positions; so the pixel-order check decides on them, as on a recording.
+            hit_i, hit_j = rng.integers(0, rows, 200), rng.integers(0, cols, 200)
+            pixels[hit_j * rows + hit_i] = rng.integers(50_000, 100_000, 200)
+            pixels = pixels.tobytes()
             model = _ld(1, _vec(origin)) + _ld(2, _vec((0.04, 0.0, 0.0))) + _ld(3, _vec((0.0, side * 0.04, 0.0)))
             data = _varint_field(1, 5) + _varint_field(2, rows) + _varint_field(3, cols) + _ld(4, pixels)
             images.append(
                 _f64(1, t) + _ld(2, attitude) + _ld(3, _vec(position)) + _varint_field(4, k) + _ld(10, _ld(1, model) + _ld(2, data))
             )
-            points = [_ld(2, _detection(t, origin + rng.normal(size=3), 10.0 + d)) for d in range(200)]
+            hits = origin + np.outer(hit_i, (0.04, 0.0, 0.0)) + np.outer(hit_j, (0.0, side * 0.04, 0.0))
+            points = [_ld(2, _detection(t, hits[d], 10.0 + d)) for d in range(200)]
             states.append(_ld(1, _f64(1, t)) + b"".join(points) + _varint_field(3, k))
         _stream(scene / f"{serial}_images.pbs", images)
         _stream(scene / f"{serial}_points.pbs", states)
