@@ -324,6 +324,10 @@ import_release(src, out, log=None)
 print(time.perf_counter() - start)
 shutil.rmtree(out)
 """
+_WHICH = """
+import os, zendar_dataset
+print(os.path.dirname(zendar_dataset.__file__))
+"""
 
 
 def compare_checkouts(sar_frames: int, repeats: int, other: pathlib.Path) -> None:
@@ -345,9 +349,13 @@ def compare_checkouts(sar_frames: int, repeats: int, other: pathlib.Path) -> Non
         for _ in range(repeats):
             for name, checkout in (("this checkout", here), (str(other), other)):
                 env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(checkout), os.environ.get("PYTHONPATH", "")])}
-                done = subprocess.run([sys.executable, "-c", _TIMED_IMPORT, str(src), str(work / "out")],
-                                      env=env, capture_output=True, text=True, check=True)
-                times[name].append(float(done.stdout.split()[-1]))
+                # cwd: ``-c`` puts the working folder first on the path, before PYTHONPATH.
+                done = subprocess.run([sys.executable, "-c", _TIMED_IMPORT + _WHICH, str(src), str(work / "out")],
+                                      env=env, cwd=work, capture_output=True, text=True, check=True)
+                found = pathlib.Path(done.stdout.split()[-1]).resolve()
+                if found != checkout / "zendar_dataset":
+                    raise SystemExit(f"--against: the process for {checkout} imported the package from {found}")
+                times[name].append(float(done.stdout.split()[-2]))
         for name, seconds in times.items():
             print(f"{name:<14} median {statistics.median(seconds):.3f} s, best {min(seconds):.3f} s "
                   f"({size / 1e6 / statistics.median(seconds):.0f} MB/s median; of {len(seconds)})")
