@@ -311,8 +311,9 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
         print(f"load average after: {os.getloadavg()}")
 
 
-# Run in a fresh process for --against: imports SRC's release into OUT twice (the first warms the numba
-# cache and the page cache) and prints the second's seconds.
+# Run in a fresh process for --against: imports the release (argv[1]) into argv[2] twice (the first
+# warms the numba cache and the page cache), prints the second's seconds, then (_WHICH) the folder the
+# package was imported from, which the caller checks.
 _TIMED_IMPORT = """
 import shutil, sys, time
 from zendar_dataset.release import import_release

@@ -363,7 +363,8 @@ def write_arrays(root: Any, arrays: list[NewArray]) -> None:
     In zarr every array is created (its attributes in the same metadata write) and then every one filled,
     each step concurrently in one pass through zarr's event loop: one at a time, each creation and each
     write is a round trip of several file operations, most of the time of writing a scene's ~40 small
-    arrays. HDF5 writes them one after the other.
+    arrays. In a local store that pass runs in memory and the files are then written directly
+    (:func:`_write_arrays_staged`). HDF5 writes them one after the other.
     """
     if not isinstance(root, zarr.Group):
         for a in arrays:
