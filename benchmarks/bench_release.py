@@ -212,7 +212,9 @@ def decode_only(root: pathlib.Path) -> None:
 
 class WriterClock:
     """Seconds spent inside ``SceneWriter`` (appends, whole-array writes, close): the format's share of an
-    import, and within it the seconds in checksums, array writes and metadata; the rest is its checks."""
+    import, and within it the seconds in checksums, array writes and metadata; the rest is its checks.
+    Whole arrays made in memory (``stores._write_arrays_staged``) count as metadata while zarr creates them,
+    as array writes while it encodes them and while their files (metadata files too) are written."""
 
     METHODS = ("append_sar", "append_radar", "append_lidar", "write_tracklog", "write_detections",
                "write_camera_index", "write_extra_array", "write_attrs", "close", "__init__")
@@ -228,7 +230,8 @@ class WriterClock:
         self._in_part = False
         targets = {
             "checksums": [(checksums, "crc32c"), (checksums, "block_checksums"), (checksums, "encode")],
-            "array writes": [(zarr.Array, "__setitem__"), (stores, "write_raw_frame"), (stores, "fill_arrays")],
+            "array writes": [(zarr.Array, "__setitem__"), (stores, "write_raw_frame"), (stores, "fill_arrays"),
+                             (stores, "_write_file")],
             "metadata": [(stores, "create_array"), (stores, "create_arrays"), (stores, "write_attrs"), (stores, "consolidate"),
                          (zarr.Array, "resize")],
         }

@@ -481,7 +481,7 @@ def _raw_local_chunk_path(array: Any):
     return lambda frame: base / array.metadata.encode_chunk_key((frame, *zeros))
 
 
-def write_raw_frame(path: pathlib.Path, frame: np.ndarray, made_dirs: set[pathlib.Path] | None = None) -> None:
+def write_raw_frame(path: pathlib.Path, frame: np.ndarray, made_dirs: set[pathlib.Path]) -> None:
     """Write one frame's bytes (C order, native endianness) as the chunk file ``path``.
 
     ``made_dirs``: folders known to exist, kept up to date here; a chunk key's folders (``c/<frame>/0``
@@ -489,10 +489,7 @@ def write_raw_frame(path: pathlib.Path, frame: np.ndarray, made_dirs: set[pathli
     (directory operations are a good part of writing a frame on some file systems).
     """
     with _naming_file(path):
-        if made_dirs is None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-        else:
-            _make_dirs(path.parent, made_dirs)
+        _make_dirs(path.parent, made_dirs)
         with open(path, "wb") as handle:
             handle.write(memoryview(np.ascontiguousarray(frame)).cast("B"))
 
