@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import json
 import pathlib
+import shutil
+import warnings
 
 import numpy as np
 import pytest
 import zarr
 
-from tests.format.conftest import ENU_ORIGIN, T0_NS, make_calibration
+from tests.format.conftest import ENU_ORIGIN, T0_NS, make_calibration, write_scene
 from zendar_dataset.format import SceneWriter, stores
 from zendar_dataset.format import writer as writer_module
 from zendar_dataset.format.validate import validate_scene
@@ -122,3 +124,17 @@ def test_an_array_is_not_stored_inside_another(tmp_path):
     with pytest.raises(FileExistsError, match="expected a group there"):
         stores.write_arrays(store.root, [stores.NewArray("tracklog/timestamp_ns", np.arange(3), (3,), stores.SMALL, {})])
     assert not (tmp_path / "s.zarr/tracklog/timestamp_ns").exists()  # refused before anything is written
+
+
+def test_consolidated_metadata_is_zarrs_own(tmp_path):
+    path = tmp_path / "s.zarr"
+    with SceneWriter(path, "s0", enu_origin=ENU_ORIGIN, calibration=make_calibration()) as writer:
+        write_scene(writer, np.random.default_rng(2))
+    shutil.copytree(path, tmp_path / "by_zarr.zarr")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        zarr.consolidate_metadata(str(tmp_path / "by_zarr.zarr"))  # zarr's own walk of the store
+    ours = json.loads((path / "zarr.json").read_bytes())
+    assert ours == json.loads((tmp_path / "by_zarr.zarr/zarr.json").read_bytes())
+    listed = ours["consolidated_metadata"]["metadata"]
+    assert {"sar/left/image", "radar/right/cube", "lidar/top/points", "labels/moving_cars/x", "tracklog"} <= set(listed)
