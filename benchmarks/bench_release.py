@@ -17,8 +17,8 @@ checks and copies, checksums, array writes and metadata) are printed too, to
 show where the time goes.
 
 Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR] [--variants] [--against SRC]``
-(``--variants``: the import against itself with zstd level 3 for whole arrays and/or without the
-read-ahead, two choices that made it faster, alternating in one process; ``--against SRC``: the import
+(``--variants``: the import against itself with one of the choices that made it faster undone — zstd
+level 3 for whole arrays, no read-ahead, the lidar read ahead by two sweeps only — alternating in one process; ``--against SRC``: the import
 of this checkout against that of another checkout of the package at ``SRC`` — e.g. a ``git worktree``
 of an earlier commit — each in a process of its own, alternating, on the same release). The machine
 may be shared: give enough repeats, and read the best (min) figures beside the medians.
@@ -273,9 +273,13 @@ class WriterClock:
 
 
 def compare_variants(sar_frames: int, repeats: int) -> None:
-    """The import as it is, and with the two choices that made it faster undone one at a time: zstd level 3
-    (the level before) for the format's whole arrays, and the records decoded in line instead of read ahead
-    on a second thread. Alternating run by run, in this process, on the same release."""
+    """The import as it is, and with choices that made it faster undone one at a time: zstd level 3 (the
+    level before) for the format's whole arrays; every stream's records decoded in line instead of read
+    ahead on a second thread; the lidar read ahead by two sweeps only, as the other streams are, instead of
+    decoded from the start of the scene beside the writing of the images and cubes. Alternating run by run,
+    in this process, on the same release."""
+    import contextlib
+
     from zarr.codecs import ZstdCodec
 
     from zendar_dataset.format import stores
@@ -283,12 +287,16 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
 
     print(f"load average before: {os.getloadavg()}")
     work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
-    current = (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead)
+    current = (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES, importer._lidar_read_ahead)
+
+    def lidar_in_line(lidars, enu):
+        return contextlib.nullcontext(importer._lidar_sweeps(lidars, enu))
+
     variants = {
         "as it is": current,
-        "zstd level 3": ((ZstdCodec(level=3),), current[1]),
-        "no read-ahead": (current[0], lambda records: records),
-        "both undone": ((ZstdCodec(level=3),), lambda records: records),
+        "zstd level 3": ((ZstdCodec(level=3),), *current[1:]),
+        "no read-ahead": (current[0], lambda records: records, current[2], lidar_in_line),
+        "lidar 2 ahead": (*current[:2], 0, current[3]),
     }
     try:
         src = work / "release"
@@ -298,8 +306,9 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
         shutil.rmtree(work / "warm")
         times: dict[str, list[float]] = {name: [] for name in variants}
         for _ in range(repeats):
-            for name, (codec, read_ahead) in variants.items():
-                stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead = codec, read_ahead
+            for name, variant in variants.items():
+                (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES,
+                 importer._lidar_read_ahead) = variant
                 out = work / "out"
                 start = time.perf_counter()
                 import_release(src, out, log=None)
@@ -309,7 +318,8 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
             print(f"{name:<14} median {statistics.median(seconds):.3f} s, best {min(seconds):.3f} s "
                   f"({size / 1e6 / statistics.median(seconds):.0f} MB/s median; of {len(seconds)})")
     finally:
-        stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead = current
+        (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES,
+         importer._lidar_read_ahead) = current
         shutil.rmtree(work, ignore_errors=True)
         print(f"load average after: {os.getloadavg()}")
 
@@ -376,8 +386,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--keep", type=pathlib.Path, default=None, help="write the release here and keep it")
     parser.add_argument("--variants", action="store_true",
-                        help="instead: the import as it is against it with zstd level 3 for whole arrays and/or "
-                             "without the read-ahead, alternating in one process")
+                        help="instead: the import as it is against it with zstd level 3 for whole arrays, without "
+                             "the read-ahead, or with the lidar read ahead by two sweeps only, alternating in one process")
     parser.add_argument("--against", type=pathlib.Path, default=None, metavar="SRC",
                         help="instead: this checkout's import against that of the checkout at SRC, alternating")
     args = parser.parse_args()

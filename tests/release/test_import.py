@@ -392,3 +392,51 @@ def test_camera_named_after_its_folder_apart_from_radars_and_pixel_evidence_in_d
         # One bright pixel per frame against a background of 0-9: capped, not "3.45e+73x".
         assert re.search(r"checked, \d+ known points in \d+ frames: (> \+60|[+-]\d+\.\d) dB brighter", line), line
         assert "e+" not in line
+
+
+def _read_ahead_threads() -> list:
+    import threading
+
+    return [t for t in threading.enumerate() if t.name == "zendar-read-ahead"]
+
+
+def test_a_lidar_record_that_does_not_decode_stops_the_scene_or_is_skipped(tmp_path, capsys):
+    """The lidar is decoded on a thread from the start of the scene: its error still names the record, the
+    scene is not written, and no decoding thread is left behind; with --skip-corrupt the sweep is lost."""
+    from zendar_dataset.release import ReleaseStream
+
+    src = tmp_path / "release"
+    build_release(src)
+    lidar = src / "2020-02-03_2252" / "001" / "lidar" / "00" / "stream.pbs"
+    with ReleaseStream(lidar) as stream:
+        records = [bytes(buf[start:end]) for _, buf, start, end in stream.records()]
+    # A third sweep with one more point whose only field is a tag without its value: it frames, it does not decode.
+    records[2] += b"\x12\x01\x08"
+    enc.write_stream(lidar, records, header=False)
+    bad_offset = sum(4 + len(r) for r in records[:2])
+    status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status == 2 and "Traceback" not in err
+    assert f"stream.pbs: byte offset {bad_offset}" in err and "does not decode" in err
+    assert list((tmp_path / "out" / "scenes").iterdir()) == []
+    assert _read_ahead_threads() == []
+    status, stdout, err = run("import-release", src, tmp_path / "out", "--skip-corrupt", capsys=capsys)
+    assert status == 0, err
+    assert f"{4 + len(records[2])} bytes at offset {bad_offset}" in stdout
+    reader = open_dataset(tmp_path / "out").open_scene("2020-02-03_2252_001")
+    assert reader.array("lidar/lidar_00/timestamp_ns").shape[0] == len(records) - 1
+    assert validate_dataset(tmp_path / "out") == []
+
+
+def test_a_failure_before_the_lidar_is_written_leaves_no_decoding_thread(tmp_path, capsys, monkeypatch):
+    from zendar_dataset.format.writer import SceneWriter
+
+    src = tmp_path / "release"
+    build_release(src)
+
+    def failing(self, *args, **kwargs):
+        raise OSError("the cube writer failed")
+
+    monkeypatch.setattr(SceneWriter, "append_radar", failing)  # after the images, before the lidar
+    status, _, err = run("import-release", src, tmp_path / "out", capsys=capsys)
+    assert status != 0 and "the cube writer failed" in err
+    assert _read_ahead_threads() == []

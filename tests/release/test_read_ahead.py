@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from zendar_dataset.release.read_ahead import read_ahead
+from zendar_dataset.release.read_ahead import ReadAhead, read_ahead
 
 
 def test_items_come_in_order_from_another_thread():
@@ -83,3 +83,28 @@ def test_an_error_in_the_caller_ends_the_thread():
             if item == 5:
                 raise RuntimeError("the writer failed")
     assert threading.active_count() == before
+
+
+def test_a_read_ahead_decodes_before_it_is_asked_and_closes_when_left():
+    produced, closed = [], threading.Event()
+
+    def records():
+        try:
+            for k in range(10):
+                produced.append(k)
+                yield k
+        finally:
+            closed.set()
+
+    before = threading.active_count()
+    with ReadAhead(records(), depth=3) as ahead:
+        deadline = time.monotonic() + 5.0
+        while len(produced) < 4 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        # Three waiting and the fourth decoded, held until there is room: nothing asked for yet.
+        assert produced == [0, 1, 2, 3]
+        assert next(ahead) == 0
+    assert closed.is_set()
+    assert threading.active_count() == before
+    with pytest.raises(StopIteration):
+        next(ahead)

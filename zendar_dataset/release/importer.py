@@ -33,8 +33,9 @@ from zendar_dataset.release import records as rec
 from zendar_dataset.release import sides as side_evidence
 from zendar_dataset.release.decoded import OpenedStream, decoded_records, finish_summary, open_stream
 from zendar_dataset.release.discover import SceneSource, find_scenes, fingerprint
+from zendar_dataset.release.lidar_rows import StoredSweep, stored_sweep
 from zendar_dataset.release.pixel_order import vote_pixel_order
-from zendar_dataset.release.read_ahead import read_ahead
+from zendar_dataset.release.read_ahead import READ_AHEAD_RECORDS, ReadAhead, read_ahead
 from zendar_dataset.release.summary import SUMMARY_JSON, ImportSummary, SceneSummary, StreamSummary
 from zendar_dataset.release.tracklog_attitude import attitude_evidence, check_attitude
 from zendar_dataset.release.wire import WireError
@@ -63,12 +64,29 @@ def _sar_grids(opened: OpenedStream, i_fastest: bool) -> Iterator[tuple[rec.SarF
         yield frame, (np.ascontiguousarray(image), holds)
 
 
-def _finite_rows(*points: np.ndarray) -> np.ndarray | None:
-    """``[P]`` bool: the rows finite in every ``[P, 3]`` array; None when all are (the rule, found by
-    one pass over each array's values rather than numpy's far slower per-row reduction)."""
-    if all(np.isfinite(p).all() for p in points):
-        return None
-    return np.logical_and.reduce([np.isfinite(p).all(axis=1) for p in points])
+#: Bytes of lidar records decoded ahead at most (their points waiting, converted, take about as much): the
+#: lidar, most of a scene's bytes, is decoded on the second core while the images and cubes are written.
+LIDAR_READ_AHEAD_BYTES = 128 << 20
+
+
+def _lidar_sweeps(lidars: dict[str, OpenedStream], enu: LocalENU) -> Iterator[tuple[str, StoredSweep | None, bool]]:
+    """Every lidar's sweeps as stored, ``(name, sweep, points computed from ECEF)``, lidar after lidar, each
+    ended by ``(name, None, False)``. Points are taken in ENU from ECEF where the release gives no
+    sensor-frame position, or gives ECEF under that name."""
+    for name, opened in lidars.items():
+        for sweep in decoded_records(opened, rec.lidar_sweep):
+            local = sweep.position_local
+            from_ecef = local is None or rec.looks_ecef(local)
+            if from_ecef:
+                local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
+            yield name, stored_sweep(sweep.timestamp_s, local, sweep.position_ecef, sweep.intensity), from_ecef
+        yield name, None, False
+
+
+def _lidar_read_ahead(lidars: dict[str, OpenedStream], enu: LocalENU) -> ReadAhead:
+    """:func:`_lidar_sweeps` decoding from now on, up to :data:`LIDAR_READ_AHEAD_BYTES` of records ahead."""
+    largest = max((int(o.stream.spans()[2].max(initial=0)) for o in lidars.values()), default=0)
+    return ReadAhead(_lidar_sweeps(lidars, enu), max(READ_AHEAD_RECORDS, LIDAR_READ_AHEAD_BYTES // max(largest, 1)))
 
 
 class _Stamps:
@@ -216,7 +234,10 @@ class _SceneImport:
             scene.assumptions,
         )
         enu = LocalENU(**enu_origin)
-        with writer.scene(self.source.scene_id, enu_origin=enu_origin, calibration={"sensors": calibration}) as out:
+        # The lidar (most of a scene's bytes) is decoded from now on, beside the writing of the other streams.
+        with _lidar_read_ahead(lidars, enu) as lidar_sweeps, writer.scene(
+            self.source.scene_id, enu_origin=enu_origin, calibration={"sensors": calibration}
+        ) as out:
             if tracklog is not None:
                 out.write_tracklog(*tracklog)
             for serial, opened in images.items():
@@ -227,7 +248,7 @@ class _SceneImport:
             for serial, opened in points.items():
                 self._write_detections(out, rename(serial), opened)
             for name, opened in lidars.items():
-                self._write_lidar(out, name, opened, enu)
+                self._write_lidar(out, name, opened, lidar_sweeps)
             for name, opened in cameras.items():
                 self._write_camera_index(out, name, opened)
             for opened in self.opened:
@@ -423,29 +444,22 @@ class _SceneImport:
             opened.summary.notes.append(f"{nan} detections with NaN ECEF position kept as NaN")
         self.summary.assumptions.append(assume.detection_fields(name, opened.stream.kind.generation))
 
-    def _write_lidar(self, out, name: str, opened: OpenedStream, enu: LocalENU) -> None:
+    def _write_lidar(self, out, name: str, opened: OpenedStream, sweeps: Iterator[tuple[str, StoredSweep | None, bool]]) -> None:
+        """Write lidar ``name`` from ``sweeps`` (:func:`_lidar_sweeps`), taking them up to this lidar's end mark."""
         stamps = _Stamps(opened.summary)
         ecef_parts, dropped, points_in_enu = [], 0, False
-        for sweep in read_ahead(decoded_records(opened, rec.lidar_sweep)):
-            local = sweep.position_local
-            if local is None or rec.looks_ecef(local):
-                local = enu.ecef_to_enu(sweep.position_ecef) if sweep.position_ecef.size else np.zeros((0, 3))
-                points_in_enu = True
-            keep = _finite_rows(local, sweep.position_ecef)
-            lost = 0 if keep is None else int(keep.size - np.count_nonzero(keep))
-            dropped += lost
+        for sweep_name, sweep, from_ecef in sweeps:
+            if sweep_name != name:
+                raise RuntimeError(f"lidar sweeps out of order: {sweep_name}'s while writing {name}")
+            if sweep is None:
+                break
+            points_in_enu |= from_ecef
+            dropped += sweep.dropped
             ns = stamps.take(sweep.timestamp_s)
             if ns is None:
                 continue
-            # Every point kept is the rule: views then, not gathers.
-            kept = slice(None) if lost == 0 else keep
-            rows = local[kept]
-            points = np.empty((rows.shape[0], 4), np.float32)
-            points[:, :3] = rows
-            points[:, 3] = np.nan_to_num(sweep.intensity[kept])  # float64 first, as ever: an inf stays inf in float32
-            out.append_lidar(name, ns, points)
-            # A copy, not a view that would keep the whole decoded sweep alive until the end of the stream.
-            ecef_parts.append(np.ascontiguousarray(sweep.position_ecef[kept]))
+            out.append_lidar(name, ns, sweep.points)
+            ecef_parts.append(sweep.position_ecef)
         stamps.report()
         if not ecef_parts:
             return
