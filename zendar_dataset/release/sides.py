@@ -139,8 +139,9 @@ class EgoPath:
         self.times_s = times_s - self.t0_s  # small numbers: interpolating near 1.3e9 s would lose microseconds
         self.positions_ecef = positions_ecef[usable][order]
 
-    def _at(self, t_s: float) -> np.ndarray:
-        return np.array([np.interp(t_s, self.times_s, self.positions_ecef[:, axis]) for axis in range(3)])
+    def _at(self, t_s: np.ndarray) -> np.ndarray:
+        """``[T, 3]`` positions at the ``[T]`` times (seconds after ``t0_s``), interpolated linearly."""
+        return np.stack([np.interp(t_s, self.times_s, self.positions_ecef[:, axis]) for axis in range(3)], axis=-1)
 
     def lateral_left_m(self, timestamp_s: float, points_ecef: np.ndarray) -> float | None:
         """Median distance of ``points_ecef`` to the left of the direction of travel at ``timestamp_s``.
@@ -154,11 +155,11 @@ class EgoPath:
         if self.times_s.size < 2 or not points.size or not self.times_s[0] <= t <= self.times_s[-1]:
             return None
         start, end = max(t - TRAVEL_WINDOW_S, self.times_s[0]), min(t + TRAVEL_WINDOW_S, self.times_s[-1])
-        travel = self._at(end) - self._at(start)
+        at_start, at_end, here = self._at(np.array([start, end, t]))
+        travel = at_end - at_start
         distance = float(np.linalg.norm(travel))
         if end - start <= 0 or distance < MIN_SPEED_MPS * (end - start):
             return None
-        here = self._at(t)
         left = np.cross(local_up_ecef(here), travel / distance)
         return float(np.median((points - here) @ left))
 
