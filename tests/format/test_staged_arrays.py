@@ -138,3 +138,52 @@ def test_consolidated_metadata_is_zarrs_own(tmp_path):
     assert ours == json.loads((tmp_path / "by_zarr.zarr/zarr.json").read_bytes())
     listed = ours["consolidated_metadata"]["metadata"]
     assert {"sar/left/image", "radar/right/cube", "lidar/top/points", "labels/moving_cars/x", "tracklog"} <= set(listed)
+
+
+def _more_dtypes(rng: np.random.Generator) -> list[stores.NewArray]:
+    return [
+        stores.NewArray("a/u8", rng.integers(0, 255, 300).astype(np.uint8), (128,), stores.SMALL, {}),
+        stores.NewArray("a/flag", rng.random(77) > 0.5, (77,), stores.SMALL, {}),
+        stores.NewArray("a/i32", rng.integers(-5, 5, (40, 2)).astype(np.int32), (16, 2), stores.SMALL, {}),
+        stores.NewArray("a/f32", rng.normal(size=(50, 4)).astype(np.float32), (50, 4), stores.FAST, {"k": 1.5}),
+        stores.NewArray("a/big_endian", rng.normal(size=(9, 3)).astype(">f8"), (4, 3), stores.SMALL, {}),
+        stores.NewArray("a/b/c/deep", np.arange(3, dtype=np.uint16), (3,), stores.SMALL, {}),
+    ]
+
+
+@pytest.mark.parametrize("make", [_arrays, _more_dtypes])
+def test_the_files_made_without_zarr_are_zarrs_for_every_kind_and_dtype(tmp_path, make):
+    """Chunks padded to the chunk shape, byte order, Blosc and zstd, bool and 1-byte types, parent groups."""
+    from zendar_dataset.format import zarr_files
+
+    staged = stores.create_store(tmp_path / "staged.zarr", "zarr")
+    stores.write_arrays(staged.root, make(np.random.default_rng(7)))
+    reference = stores.create_store(tmp_path / "reference.zarr", "zarr")
+    arrays = make(np.random.default_rng(7))
+    stores.fill_arrays(stores.create_arrays(reference.root, arrays), arrays)
+    # Every array of these was made here, none handed to zarr.
+    assert all(
+        zarr_files.chunk_codec(stores._zarr_templates(a.data.dtype, a.data.ndim, a.kind)[0]) is not None for a in arrays
+    )
+    written, expected = _tree(tmp_path / "staged.zarr"), _tree(tmp_path / "reference.zarr")
+    assert written.keys() == expected.keys()
+    for key in expected:
+        assert written[key] == expected[key], key
+    opened = zarr.open_group(str(tmp_path / "staged.zarr"), mode="r")
+    for a in make(np.random.default_rng(7)):
+        np.testing.assert_array_equal(opened[a.path][...], a.data)
+
+
+def test_codecs_not_made_here_are_written_by_zarr(tmp_path, monkeypatch):
+    from zendar_dataset.format import zarr_files
+
+    template = {"codecs": [{"name": "bytes", "configuration": {"endian": "little"}}, {"name": "gzip", "configuration": {"level": 1}}]}
+    assert zarr_files.chunk_codec(template) is None
+    assert zarr_files.chunk_codec({"codecs": [{"name": "transpose"}, {"name": "bytes"}]}) is None
+    monkeypatch.setattr(zarr_files, "chunk_codec", lambda template: None)
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    stores.write_arrays(store.root, _arrays(np.random.default_rng(5)))
+    reference = stores.create_store(tmp_path / "reference.zarr", "zarr")
+    arrays = _arrays(np.random.default_rng(5))
+    stores.fill_arrays(stores.create_arrays(reference.root, arrays), arrays)
+    assert _tree(tmp_path / "s.zarr") == _tree(tmp_path / "reference.zarr")

@@ -38,7 +38,7 @@ from zarr.core.buffer import default_buffer_prototype
 from zarr.core.sync import sync
 
 from zendar_dataset.errors import ZendarFormatError
-
+from zendar_dataset.format import zarr_files
 from zendar_dataset.format.guarded_file import GuardedFile
 
 BACKENDS = ("zarr", "hdf5")
@@ -189,7 +189,7 @@ def consolidate(path: pathlib.Path) -> None:
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Consolidated metadata is currently not part")
         zarr.consolidate_metadata(zarr.storage.MemoryStore(files))
-    _write_file(pathlib.Path(path) / "zarr.json", files["zarr.json"])
+    _write_file(pathlib.Path(path) / "zarr.json", files["zarr.json"].to_bytes())
 
 
 def _metadata_files(root: pathlib.Path, prefix: str = "") -> Iterator[tuple[str, bytes]]:
@@ -384,8 +384,8 @@ def write_arrays(root: Any, arrays: list[NewArray]) -> None:
     In zarr every array is created (its attributes in the same metadata write) and then every one filled,
     each step concurrently in one pass through zarr's event loop: one at a time, each creation and each
     write is a round trip of several file operations, most of the time of writing a scene's ~40 small
-    arrays. In a local store that pass runs in memory and the files are then written directly
-    (:func:`_write_arrays_staged`). HDF5 writes them one after the other.
+    arrays. In a local store the files are made in memory, zarr's own bytes without its event loop, and
+    written directly (:func:`_write_arrays_staged`). HDF5 writes them one after the other.
     """
     if not isinstance(root, zarr.Group):
         for a in arrays:
@@ -404,23 +404,22 @@ def write_arrays(root: Any, arrays: list[NewArray]) -> None:
 
 
 def _write_arrays_staged(root: zarr.Group, arrays: list[NewArray]) -> None:
-    """:func:`write_arrays` into a local store: zarr makes every file of the arrays (metadata and encoded
-    chunks) in memory, and they are then written as plain files, each folder made once.
+    """:func:`write_arrays` into a local store: every file of the arrays (metadata and encoded chunks) is
+    made in memory (:func:`_staged_files`), then written as a plain file, each folder made once.
 
     zarr's local store hands every file operation to a worker thread and makes each file's folders
     anew; the ~40 small arrays of a scene took 60-100 ms that way, about half of importing a short
-    recording (docs/release.md). The bytes written are zarr's own. Group metadata zarr makes for the
-    folders above an array is written only where no group exists yet, so a group's attributes are kept.
+    recording (docs/release.md). Group metadata made for the folders above an array is written only
+    where no group exists yet, so a group's attributes are kept.
     """
     base = pathlib.Path(root.store.root) / root.store_path.path
     array_folders = {a.path.strip("/") for a in arrays}
     for folder in sorted(array_folders):
         if (base / folder / "zarr.json").exists():
             raise FileExistsError(f"{base / folder}: a node is stored there already")
-    files: dict[str, Any] = {}
-    fill_arrays(create_arrays(zarr.open_group(zarr.storage.MemoryStore(files), mode="w-", zarr_format=3), arrays), arrays)
+    files = _staged_files(arrays)
     made_dirs = {base}
-    # The groups above the arrays first, top down (the staging root's ``zarr.json`` is ``root``'s, there already).
+    # The groups above the arrays first, top down.
     groups = sorted(
         (key.rpartition("/")[0] for key in files if key.endswith("/zarr.json") and key.rpartition("/")[0] not in array_folders),
         key=lambda folder: (folder.count("/"), folder),
@@ -431,10 +430,52 @@ def _write_arrays_staged(root: zarr.Group, arrays: list[NewArray]) -> None:
             _write_file(base / folder / "zarr.json", files[f"{folder}/zarr.json"], exclusive=True)
         except FileExistsError:
             _require_group_metadata(base / folder / "zarr.json")  # an existing group keeps its own attributes
-    written = {"zarr.json", *(f"{folder}/zarr.json" for folder in groups)}
+    written = {f"{folder}/zarr.json" for folder in groups}
     for key in sorted(files.keys() - written):
         _make_dirs((base / key).parent, made_dirs)
         _write_file(base / key, files[key])
+
+
+def _staged_files(arrays: list[NewArray]) -> dict[str, bytes]:
+    """Every file of ``arrays`` and of the groups above them (store-relative key -> bytes): made from
+    zarr's own metadata for arrays of their kind (:mod:`zendar_dataset.format.zarr_files`), or by zarr in
+    a ``MemoryStore`` for an array whose codecs that module does not make."""
+    files: dict[str, bytes] = {}
+    through_zarr = []
+    for a in arrays:
+        template, group = _zarr_templates(a.data.dtype, a.data.ndim, a.kind)
+        chunks = tuple(max(1, int(c)) for c in a.chunks)
+        made = zarr_files.array_files(a.path.strip("/"), a.data, chunks, a.attributes, template)
+        if made is None:
+            through_zarr.append(a)
+            continue
+        files.update(made)
+        parts = a.path.strip("/").split("/")
+        for depth in range(1, len(parts)):
+            files.setdefault("/".join(parts[:depth]) + "/zarr.json", group)
+    if through_zarr:
+        staged: dict[str, Any] = {}
+        fill_arrays(create_arrays(zarr.open_group(zarr.storage.MemoryStore(staged), mode="w-", zarr_format=3), through_zarr), through_zarr)
+        # The staging root's ``zarr.json`` is the store's, there already.
+        files.update({key: value.to_bytes() for key, value in staged.items() if key != "zarr.json"})
+    return files
+
+
+_TEMPLATES: dict[tuple[str, int, str], tuple[dict[str, Any], dict[str, Any]]] = {}
+
+
+def _zarr_templates(dtype: np.dtype, ndim: int, kind: str) -> tuple[dict[str, Any], bytes]:
+    """The metadata zarr writes for an array of ``dtype``, rank ``ndim`` and ``kind`` made by
+    :func:`create_arrays` (its document) and for a group above such an array (its bytes). Made by zarr
+    once per process and kind."""
+    key = (np.dtype(dtype).str, ndim, kind)
+    if key not in _TEMPLATES:
+        staged: dict[str, Any] = {}
+        root = zarr.open_group(zarr.storage.MemoryStore(staged), mode="w-", zarr_format=3)
+        create_arrays(root, [NewArray("group/array", np.zeros((1,) * ndim, dtype), (1,) * ndim, kind)])
+        _TEMPLATES[key] = (json.loads(staged["group/array/zarr.json"].to_bytes()), json.loads(staged["group/zarr.json"].to_bytes()))
+    array, group = _TEMPLATES[key]
+    return array, json.dumps(group, indent=zarr.config.get("json_indent"), allow_nan=True).encode()
 
 
 def _require_group_metadata(path: pathlib.Path) -> None:
@@ -447,9 +488,9 @@ def _require_group_metadata(path: pathlib.Path) -> None:
         raise FileExistsError(f"{path.parent}: expected a group there to hold arrays, found {node_type or 'unreadable metadata'}")
 
 
-def _write_file(path: pathlib.Path, value: Any, exclusive: bool = False) -> None:
+def _write_file(path: pathlib.Path, value: bytes, exclusive: bool = False) -> None:
     with _naming_file(path), open(path, "xb" if exclusive else "wb") as handle:
-        handle.write(memoryview(value.as_numpy_array()).cast("B"))
+        handle.write(value)
 
 
 def create_arrays(root: zarr.Group, arrays: list[NewArray]) -> list[Any]:
