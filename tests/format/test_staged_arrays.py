@@ -187,3 +187,45 @@ def test_codecs_not_made_here_are_written_by_zarr(tmp_path, monkeypatch):
     arrays = _arrays(np.random.default_rng(5))
     stores.fill_arrays(stores.create_arrays(reference.root, arrays), arrays)
     assert _tree(tmp_path / "s.zarr") == _tree(tmp_path / "reference.zarr")
+
+
+def test_rows_written_straight_to_chunk_files_are_zarrs_bytes(tmp_path):
+    """Lidar points in batches of whole chunks from a chunk boundary, the last chunk short and padded."""
+    chunk = 1000
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(3 * chunk + 17, 4)).astype(np.float32)
+    mine = stores.create_store(tmp_path / "mine.zarr", "zarr")
+    reference = stores.create_store(tmp_path / "reference.zarr", "zarr")
+    arrays = [
+        stores.create_array(store.root, "lidar/top/points", shape=(0, 4), dtype=np.dtype(np.float32), chunks=(chunk, 4),
+                            kind=stores.FAST, resizable=True)
+        for store in (mine, reference)
+    ]
+    made: set[pathlib.Path] = set()
+    for start, stop in ((0, 2 * chunk), (2 * chunk, points.shape[0])):
+        arrays[0].resize((stop, 4))
+        stores.write_rows(arrays[0], start, points[start:stop], made)
+    arrays[1].resize(points.shape)
+    arrays[1][...] = points  # zarr's own write
+    assert _tree(tmp_path / "mine.zarr") == _tree(tmp_path / "reference.zarr")
+    assert sorted(p.name for p in (tmp_path / "mine.zarr/lidar/top/points/c").iterdir()) == ["0", "1", "2", "3"]
+    np.testing.assert_array_equal(zarr.open_array(str(tmp_path / "mine.zarr/lidar/top/points"), mode="r")[...], points)
+
+
+def test_rows_not_on_a_chunk_boundary_go_through_zarr(tmp_path):
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    array = stores.create_array(store.root, "x", shape=(10, 2), dtype=np.dtype(np.float32), chunks=(4, 2), kind=stores.FAST, resizable=True)
+    stores.write_rows(array, 3, np.ones((5, 2), np.float32), set())
+    expected = np.zeros((10, 2), np.float32)
+    expected[3:8] = 1
+    np.testing.assert_array_equal(array[...], expected)
+
+
+def test_rows_that_end_inside_a_chunk_keep_the_rows_after_them(tmp_path):
+    store = stores.create_store(tmp_path / "s.zarr", "zarr")
+    array = stores.create_array(store.root, "x", shape=(10, 2), dtype=np.dtype(np.float32), chunks=(4, 2), kind=stores.FAST, resizable=True)
+    stores.write_rows(array, 0, np.full((10, 2), 7, np.float32), set())
+    stores.write_rows(array, 4, np.ones((2, 2), np.float32), set())  # rows 6 and 7 of that chunk are kept
+    expected = np.full((10, 2), 7, np.float32)
+    expected[4:6] = 1
+    np.testing.assert_array_equal(array[...], expected)

@@ -556,6 +556,32 @@ def write_raw_frame(path: pathlib.Path, frame: np.ndarray, made_dirs: set[pathli
             handle.write(memoryview(np.ascontiguousarray(frame)).cast("B"))
 
 
+def write_rows(array: Any, first_row: int, rows: np.ndarray, made_dirs: set[pathlib.Path]) -> None:
+    """Write ``rows`` as rows ``first_row:`` of ``array`` (already that long).
+
+    Rows of a zarr array in a local directory that start on a chunk boundary and fill their last chunk,
+    or end the array, have their chunk files written directly: zarr's bytes
+    (:func:`zarr_files.chunk_files`), the folders made once (``made_dirs``, kept up to date), without
+    zarr's event loop. Anything else (other rows, other arrays, codecs that module does not make) is
+    written by the backend.
+    """
+    made = None
+    if isinstance(array, zarr.Array) and isinstance(array.store, zarr.storage.LocalStore):
+        stop = first_row + rows.shape[0]
+        # A chunk is written whole: its padding must be no one's rows.
+        if stop % array.chunks[0] == 0 or stop == array.shape[0]:
+            made = zarr_files.chunk_files(rows, tuple(array.chunks), array.metadata.to_dict(), first_row)
+    if made is None:
+        array[first_row : first_row + rows.shape[0]] = rows
+        return
+    base = pathlib.Path(array.store.root) / array.path
+    made_dirs.add(base)  # its metadata is there
+    for key, value in made.items():
+        with _naming_file(base / key):
+            _make_dirs((base / key).parent, made_dirs)
+        _write_file(base / key, value)
+
+
 def _make_dirs(folder: pathlib.Path, made: set[pathlib.Path]) -> None:
     """Make ``folder`` and the folders above it not in ``made`` (top down), adding them to ``made``."""
     missing = []

@@ -105,6 +105,7 @@ class _Stream:
     written_rows: int = 0
     bulk_crc32c: list[int] = field(default_factory=list)  # one per chunk of ``bulk`` written so far
     offsets: list[int] = field(default_factory=lambda: [0])
+    made_dirs: set[pathlib.Path] = field(default_factory=set)  # folders of ``bulk``'s chunks made so far
 
 
 class SceneWriter:
@@ -370,7 +371,7 @@ class SceneWriter:
         take = rows.shape[0] if final else (rows.shape[0] // LIDAR_CHUNK_ROWS) * LIDAR_CHUNK_ROWS
         start = stream.written_rows
         stream.bulk.resize((start + take, 4))
-        stream.bulk[start : start + take] = rows[:take]
+        stores.write_rows(stream.bulk, start, rows[:take], stream.made_dirs)
         stream.bulk_crc32c.extend(checksums.block_checksums(rows[:take], (LIDAR_CHUNK_ROWS, 4)))
         stream.written_rows += take
         rest = rows[take:]

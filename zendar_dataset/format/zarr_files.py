@@ -49,14 +49,34 @@ def chunk_codec(template: dict[str, Any]) -> tuple[str | None, Any] | None:
 def array_files(
     path: str, data: np.ndarray, chunks: tuple[int, ...], attributes: dict[str, Any], template: dict[str, Any]
 ) -> dict[str, bytes] | None:
-    """The files of array ``path`` holding ``data`` in ``chunks`` (keys relative to the store), or None when
-    the template's codecs are not ones made here.
+    """The files of array ``path`` holding ``data`` in ``chunks`` (keys relative to the store): its
+    ``zarr.json`` and :func:`chunk_files`; None when the template's codecs are not ones made here."""
+    made = chunk_files(data, chunks, template)
+    if made is None:
+        return None
+    document = dict(template)
+    document["shape"] = list(data.shape)
+    grid = dict(template["chunk_grid"])
+    grid["configuration"] = {**grid.get("configuration", {}), "chunk_shape": list(chunks)}
+    document["chunk_grid"] = grid
+    document["attributes"] = attributes
+    files = {f"{path}/zarr.json": json.dumps(document, allow_nan=True, indent=zarr.config.get("json_indent")).encode()}
+    files.update((f"{path}/{key}", value) for key, value in made.items())
+    return files
 
-    Every chunk is stored (zarr's ``write_empty_chunks``), the last ones padded to the whole chunk shape
-    with the fill value, under zarr's default chunk keys (``c/<i>/<j>…`` with the template's separator).
+
+def chunk_files(
+    data: np.ndarray, chunks: tuple[int, ...], template: dict[str, Any], first_row: int = 0
+) -> dict[str, bytes] | None:
+    """The encoded chunks holding ``data`` as rows ``first_row:`` of an array (``first_row`` a multiple of
+    ``chunks[0]``), keyed as zarr's default chunk keys (``c/<i>/<j>…`` with the template's separator);
+    None when the template's codecs, chunk grid or fill value are not ones made here.
+
+    Every chunk is stored (zarr's ``write_empty_chunks``), a last one short of rows padded to the whole
+    chunk shape with the fill value, as zarr stores it.
     """
     codec = chunk_codec(template)
-    if codec is None:
+    if codec is None or first_row % chunks[0]:
         return None
     endian, compressor = codec
     try:
@@ -69,14 +89,9 @@ def array_files(
     if encoding.get("name") != "default" or template.get("chunk_grid", {}).get("name") != "regular":
         return None
     separator = encoding.get("configuration", {}).get("separator", "/")
-    document = dict(template)
-    document["shape"] = list(data.shape)
-    grid = dict(template["chunk_grid"])
-    grid["configuration"] = {**grid.get("configuration", {}), "chunk_shape": list(chunks)}
-    document["chunk_grid"] = grid
-    document["attributes"] = attributes
-    files = {f"{path}/zarr.json": json.dumps(document, allow_nan=True, indent=zarr.config.get("json_indent")).encode()}
     stored = data.dtype if data.dtype.itemsize == 1 else data.dtype.newbyteorder("<" if endian == "little" else ">")
+    first_chunk = first_row // chunks[0]
+    files = {}
     for index in np.ndindex(*(-(-n // c) for n, c in zip(data.shape, chunks))):
         block = data[tuple(slice(i * c, (i + 1) * c) for i, c in zip(index, chunks))]
         if block.shape != chunks:
@@ -84,5 +99,6 @@ def array_files(
             whole[tuple(slice(0, n) for n in block.shape)] = block
             block = whole
         raw = np.ascontiguousarray(block, stored).reshape(-1).view(np.uint8)
-        files[f"{path}/" + separator.join(["c", *map(str, index)])] = bytes(compressor.encode(raw)) if compressor else raw.tobytes()
+        key = separator.join(["c", str(first_chunk + index[0]), *map(str, index[1:])])
+        files[key] = bytes(compressor.encode(raw)) if compressor else raw.tobytes()
     return files
