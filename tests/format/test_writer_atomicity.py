@@ -83,16 +83,16 @@ def test_an_interrupt_while_the_writer_starts_leaves_no_temporary(tmp_path, back
     # Ctrl-C (or a full disk) can land before any ``with`` block owns the temporary store.
     from zendar_dataset.format import stores
 
-    real_write_attrs = stores.write_attrs
+    real_merge_attrs = stores.merge_attrs
     calls = []
 
-    def write_attrs(node, attrs):
+    def merge_attrs(root, path, attrs):  # the writer's two attribute writes as it starts: root, calibration
         calls.append(attrs)
         if len(calls) == failing_call:
             raise KeyboardInterrupt
-        return real_write_attrs(node, attrs)
+        return real_merge_attrs(root, path, attrs)
 
-    monkeypatch.setattr(stores, "write_attrs", write_attrs)
+    monkeypatch.setattr(stores, "merge_attrs", merge_attrs)
     suffix = ".zarr" if backend == "zarr" else ".h5"
     with pytest.raises(KeyboardInterrupt):
         SceneWriter(tmp_path / f"x{suffix}", "x", enu_origin=ENU_ORIGIN, calibration=make_calibration(), backend=backend)

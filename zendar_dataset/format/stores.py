@@ -397,10 +397,15 @@ def write_arrays(root: Any, arrays: list[NewArray]) -> None:
 
     if not arrays:
         return
-    if isinstance(root.store, zarr.storage.LocalStore):
+    if is_local_zarr(root):
         _write_arrays_staged(root, arrays)
     else:
         fill_arrays(create_arrays(root, arrays), arrays)
+
+
+def is_local_zarr(root: Any) -> bool:
+    """Whether ``root`` is a zarr group in a local directory."""
+    return isinstance(root, zarr.Group) and isinstance(root.store, zarr.storage.LocalStore)
 
 
 def _write_arrays_staged(root: zarr.Group, arrays: list[NewArray]) -> None:
@@ -688,6 +693,30 @@ def chunk_stored(array: Any, coords: tuple[int, ...]) -> bool:
         return True  # contiguous storage: the data block exists with the dataset
     offset = tuple(int(i) * int(c) for i, c in zip(coords, array.chunks))
     return array.id.get_chunk_info_by_coord(offset).byte_offset is not None
+
+
+def merge_attrs(root: Any, path: str, attrs: dict[str, Any]) -> None:
+    """Add ``attrs`` to the attributes of the node at ``path`` below ``root`` (``""``: ``root``), making a
+    group there where there is no node (objects and lists become JSON strings in HDF5).
+
+    In a local zarr store an existing node's ``zarr.json`` is merged and rewritten directly, serialised as
+    zarr serialises it, instead of through zarr's event loop (~1 ms a call, a dozen calls a scene). zarr
+    objects already open on that node keep their old attributes: for writers that do not use them again.
+    """
+    if is_local_zarr(root):
+        metadata = pathlib.Path(root.store.root) / root.store_path.path / path / "zarr.json"
+        try:
+            document = json.loads(metadata.read_bytes())
+        except FileNotFoundError:
+            document = None
+        if isinstance(document, dict) and isinstance(document.get("attributes", {}), dict):
+            document["attributes"] = {**document.get("attributes", {}), **attrs}
+            _write_file(metadata, json.dumps(document, allow_nan=True, indent=zarr.config.get("json_indent")).encode())
+            return
+    if not path:
+        write_attrs(root, attrs)
+    else:
+        write_attrs(root[path] if path in root else root.require_group(path), attrs)
 
 
 def read_attrs(node: Any) -> dict[str, Any]:

@@ -98,6 +98,7 @@ class _Stream:
     timestamps: list[int] = field(default_factory=list)
     small: dict[str, list[np.ndarray]] = field(default_factory=dict)
     bulk: Any = None
+    bulk_path: str = ""  # where ``bulk`` is, below the scene's root
     appender: stores.FrameAppender | None = None  # appends to ``bulk`` when it is stored one frame per chunk
     frame_shape: tuple[int, ...] | None = None
     pending_points: list[np.ndarray] = field(default_factory=list)
@@ -168,8 +169,9 @@ class SceneWriter:
         try:
             self._store = stores.create_store(self._temp_path, self.backend)
             root = self._store.root
-            stores.write_attrs(
+            stores.merge_attrs(
                 root,
+                "",
                 {
                     "scene_id": self.scene_id,
                     "time_reference": TIME_REFERENCE,
@@ -177,7 +179,7 @@ class SceneWriter:
                     checksums.ROOT_ATTR: checksums.ALGORITHM,
                 },
             )
-            stores.write_attrs(root.require_group(CALIBRATION_GROUP), {CALIBRATION_ATTR: self.calibration.to_json()})
+            stores.merge_attrs(root, CALIBRATION_GROUP, {CALIBRATION_ATTR: self.calibration.to_json()})
         except BaseException:
             # No ``with`` block owns the store yet (a full disk, Ctrl-C): discard it here.
             if hasattr(self, "_store"):
@@ -235,9 +237,10 @@ class SceneWriter:
         self._stamp(stream, timestamp_ns)
         if stream.bulk is None:
             stream.frame_shape = frame.shape
+            stream.bulk_path = f"{stream.path}/{name}"
             stream.bulk = stores.create_array(
                 self._store.root,
-                f"{stream.path}/{name}",
+                stream.bulk_path,
                 shape=(0, *frame.shape),
                 dtype=frame.dtype,
                 chunks=(1, *frame.shape),
@@ -348,9 +351,10 @@ class SceneWriter:
         points = _as(points, "float32", (None, 4), f"{self.scene_id}: {stream.path}/points")
         self._stamp(stream, timestamp_ns)
         if stream.bulk is None:
+            stream.bulk_path = f"{stream.path}/points"
             stream.bulk = stores.create_array(
                 self._store.root,
-                f"{stream.path}/points",
+                stream.bulk_path,
                 shape=(0, 4),
                 dtype=np.dtype(np.float32),
                 chunks=(LIDAR_CHUNK_ROWS, 4),
@@ -503,7 +507,7 @@ class SceneWriter:
         if self._closed:
             raise RuntimeError(f"{self.scene_id}: the writer is closed")
         root = self._store.root
-        stores.write_attrs(root.require_group(path) if path else root, attrs)
+        stores.merge_attrs(root, path, attrs)
 
     def _write_small(self, path: str, array: np.ndarray) -> None:
         """Queue a whole array (with its chunk checksums; compressed as :func:`stores.array_kind` says) for
@@ -539,9 +543,9 @@ class SceneWriter:
             if stream.appender is not None:
                 stream.appender.finish()
             if stream.bulk is not None:
-                stores.write_attrs(stream.bulk, {checksums.ARRAY_ATTR: checksums.encode(stream.bulk_crc32c)})
+                stores.merge_attrs(self._store.root, stream.bulk_path, {checksums.ARRAY_ATTR: checksums.encode(stream.bulk_crc32c)})
                 if stream.path.startswith("sar/") and np.dtype(stream.bulk.dtype) in SAR_MAGNITUDE_DTYPES:
-                    stores.write_attrs(self._store.root.require_group(stream.path), {SAR_MAGNITUDE_ONLY_ATTR: True})
+                    stores.merge_attrs(self._store.root, stream.path, {SAR_MAGNITUDE_ONLY_ATTR: True})
         if self._labels is not None:
             sar_timestamps = self._first_sar_timestamps()
             label_timestamps = self._labels["timestamp_ns"]
