@@ -213,8 +213,8 @@ def decode_only(root: pathlib.Path) -> None:
 class WriterClock:
     """Seconds spent inside ``SceneWriter`` (appends, whole-array writes, close): the format's share of an
     import, and within it the seconds in checksums, array writes and metadata; the rest is its checks.
-    Whole arrays made in memory (``stores._write_arrays_staged``) count as metadata while zarr creates them,
-    as array writes while it encodes them and while their files (metadata files too) are written."""
+    Whole arrays' files (``stores._staged_files``: their metadata and encoded chunks, made in memory) count
+    as array writes, as do the lidar's chunk files (``stores.write_rows``); attribute merges as metadata."""
 
     METHODS = ("append_sar", "append_radar", "append_lidar", "write_tracklog", "write_detections",
                "write_camera_index", "write_extra_array", "write_attrs", "close", "__init__")
@@ -231,9 +231,9 @@ class WriterClock:
         targets = {
             "checksums": [(checksums, "crc32c"), (checksums, "block_checksums"), (checksums, "encode")],
             "array writes": [(zarr.Array, "__setitem__"), (stores, "write_raw_frame"), (stores, "fill_arrays"),
-                             (stores, "_write_file")],
+                             (stores, "_write_file"), (stores, "_staged_files"), (stores, "write_rows")],
             "metadata": [(stores, "create_array"), (stores, "create_arrays"), (stores, "write_attrs"), (stores, "consolidate"),
-                         (zarr.Array, "resize")],
+                         (stores, "merge_attrs"), (zarr.Array, "resize")],
         }
         self.saved = [(SceneWriter, name, getattr(SceneWriter, name)) for name in self.METHODS]
         for owner, name, method in self.saved:
