@@ -700,8 +700,9 @@ def merge_attrs(root: Any, path: str, attrs: dict[str, Any]) -> None:
     group there where there is no node (objects and lists become JSON strings in HDF5).
 
     In a local zarr store an existing node's ``zarr.json`` is merged and rewritten directly, serialised as
-    zarr serialises it, instead of through zarr's event loop (~1 ms a call, a dozen calls a scene). zarr
-    objects already open on that node keep their old attributes: for writers that do not use them again.
+    zarr serialises it, instead of through zarr's event loop (~1 ms a call, a dozen calls a scene); it is
+    rewritten in place, for stores still being written (a scene writer's temporary store). zarr objects
+    already open on that node keep their old attributes: for writers that do not use them again.
     """
     if is_local_zarr(root):
         metadata = pathlib.Path(root.store.root) / root.store_path.path / path / "zarr.json"
