@@ -18,7 +18,8 @@ show where the time goes.
 
 Run: ``python benchmarks/bench_release.py [--sar-frames N] [--repeats R] [--keep DIR] [--variants] [--against SRC]``
 (``--variants``: the import against itself with one of the choices that made it faster undone — zstd
-level 3 for whole arrays, no read-ahead, the lidar read ahead by two sweeps only — alternating in one process; ``--against SRC``: the import
+level 3 for whole arrays, no read-ahead, the lidar read ahead by two sweeps only, the files written by
+zarr — alternating in one process; ``--against SRC``: the import
 of this checkout against that of another checkout of the package at ``SRC`` — e.g. a ``git worktree``
 of an earlier commit — each in a process of its own, alternating, on the same release). The machine
 may be shared: give enough repeats, and read the best (min) figures beside the medians.
@@ -276,18 +277,20 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
     """The import as it is, and with choices that made it faster undone one at a time: zstd level 3 (the
     level before) for the format's whole arrays; every stream's records decoded in line instead of read
     ahead on a second thread; the lidar read ahead by two sweeps only, as the other streams are, instead of
-    decoded from the start of the scene beside the writing of the images and cubes. Alternating run by run,
-    in this process, on the same release."""
+    decoded from the start of the scene beside the writing of the images and cubes; whole arrays and lidar
+    chunks written by zarr instead of made directly (``format/zarr_files.py``). Alternating run by run, in
+    this process, on the same release."""
     import contextlib
 
     from zarr.codecs import ZstdCodec
 
-    from zendar_dataset.format import stores
+    from zendar_dataset.format import stores, zarr_files
     from zendar_dataset.release import importer
 
     print(f"load average before: {os.getloadavg()}")
     work = pathlib.Path(tempfile.mkdtemp(prefix="bench_release_"))
-    current = (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES, importer._lidar_read_ahead)
+    current = (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES,
+               importer._lidar_read_ahead, zarr_files.chunk_files)
 
     def lidar_in_line(lidars, enu):
         return contextlib.nullcontext(importer._lidar_sweeps(lidars, enu))
@@ -295,8 +298,9 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
     variants = {
         "as it is": current,
         "zstd level 3": ((ZstdCodec(level=3),), *current[1:]),
-        "no read-ahead": (current[0], lambda records: records, current[2], lidar_in_line),
-        "lidar 2 ahead": (*current[:2], 0, current[3]),
+        "no read-ahead": (current[0], lambda records: records, current[2], lidar_in_line, current[4]),
+        "lidar 2 ahead": (*current[:2], 0, *current[3:]),
+        "files by zarr": (*current[:4], lambda *args, **kwargs: None),
     }
     try:
         src = work / "release"
@@ -308,7 +312,8 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
         for _ in range(repeats):
             for name, variant in variants.items():
                 (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES,
-                 importer._lidar_read_ahead) = variant
+                 importer._lidar_read_ahead, zarr_files.chunk_files) = variant
+                stores._TEMPLATES.clear()  # made with the compressors of the variant before
                 out = work / "out"
                 start = time.perf_counter()
                 import_release(src, out, log=None)
@@ -319,7 +324,7 @@ def compare_variants(sar_frames: int, repeats: int) -> None:
                   f"({size / 1e6 / statistics.median(seconds):.0f} MB/s median; of {len(seconds)})")
     finally:
         (stores._ZARR_COMPRESSORS[stores.SMALL], importer.read_ahead, importer.LIDAR_READ_AHEAD_BYTES,
-         importer._lidar_read_ahead) = current
+         importer._lidar_read_ahead, zarr_files.chunk_files) = current
         shutil.rmtree(work, ignore_errors=True)
         print(f"load average after: {os.getloadavg()}")
 
@@ -387,7 +392,8 @@ def main() -> None:
     parser.add_argument("--keep", type=pathlib.Path, default=None, help="write the release here and keep it")
     parser.add_argument("--variants", action="store_true",
                         help="instead: the import as it is against it with zstd level 3 for whole arrays, without "
-                             "the read-ahead, or with the lidar read ahead by two sweeps only, alternating in one process")
+                             "the read-ahead, with the lidar read ahead by two sweeps only, or with the files written "
+                             "by zarr, alternating in one process")
     parser.add_argument("--against", type=pathlib.Path, default=None, metavar="SRC",
                         help="instead: this checkout's import against that of the checkout at SRC, alternating")
     args = parser.parse_args()
