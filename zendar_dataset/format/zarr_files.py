@@ -4,11 +4,13 @@ zarr makes them through its event loop, ~0.9 ms an array of Python (dtype parsin
 made anew for every array, each chunk's codec call handed to a worker thread): 36 ms for 40 small arrays
 of 3 000–9 000 rows against 10 ms here, and an import of the benchmark's recording 0.42–0.47 s against
 0.35–0.36 s with the lidar's chunks made here too (``python benchmarks/bench_release.py --variants``,
-docs/release.md). The metadata is zarr's own: a document zarr made for an array of the same data type, rank and codecs (the
-*template*), with the three fields the zarr v3 specification gives each array — ``shape``, the regular
-chunk grid's ``chunk_shape`` and ``attributes`` — set, and serialised as zarr serialises it. The chunks
-are encoded by the numcodecs codecs zarr itself calls, configured from the template's ``codecs``; a
-template with any other codec is refused (None), and the caller lets zarr write the array.
+docs/release.md).
+
+The metadata is zarr's own: a document zarr made for an array of the same data type, rank and codecs
+(the *template*), with the three fields the zarr v3 specification gives each array — ``shape``, the
+regular chunk grid's ``chunk_shape`` and ``attributes`` — set, and serialised as zarr serialises it. The
+chunks are encoded by the numcodecs codecs zarr itself calls, configured from the template's ``codecs``;
+a template with any other codec chain is refused (None), and the caller lets zarr write the array.
 ``tests/format/test_staged_arrays.py`` compares the files with zarr's, byte for byte.
 """
 
@@ -77,7 +79,7 @@ def chunk_files(
     chunk shape with the fill value, as zarr stores it.
     """
     codec = chunk_codec(template)
-    if codec is None or first_row % chunks[0]:
+    if codec is None or data.ndim == 0 or first_row % chunks[0]:
         return None
     endian, compressor = codec
     try:
