@@ -466,6 +466,7 @@ def _staged_files(arrays: list[NewArray]) -> dict[str, bytes]:
     return files
 
 
+# Keyed by kind: a kind's compressors (_ZARR_COMPRESSORS) are constants (the benchmark that swaps them clears this).
 _TEMPLATES: dict[tuple[str, int, str], tuple[dict[str, Any], dict[str, Any]]] = {}
 
 
