@@ -430,15 +430,13 @@ def _write_arrays_staged(root: zarr.Group, arrays: list[NewArray]) -> None:
         key=lambda folder: (folder.count("/"), folder),
     )
     for folder in groups:
-        _make_dirs(base / folder, made_dirs)
         try:
-            _write_file(base / folder / "zarr.json", files[f"{folder}/zarr.json"], exclusive=True)
+            _write_file(base / folder / "zarr.json", files[f"{folder}/zarr.json"], made_dirs, exclusive=True)
         except FileExistsError:
             _require_group_metadata(base / folder / "zarr.json")  # an existing group keeps its own attributes
     written = {f"{folder}/zarr.json" for folder in groups}
     for key in sorted(files.keys() - written):
-        _make_dirs((base / key).parent, made_dirs)
-        _write_file(base / key, files[key])
+        _write_file(base / key, files[key], made_dirs)
 
 
 def _staged_files(arrays: list[NewArray]) -> dict[str, bytes]:
@@ -494,9 +492,15 @@ def _require_group_metadata(path: pathlib.Path) -> None:
         raise FileExistsError(f"{path.parent}: expected a group there to hold arrays, found {node_type or 'unreadable metadata'}")
 
 
-def _write_file(path: pathlib.Path, value: bytes, exclusive: bool = False) -> None:
-    with _naming_file(path), open(path, "xb" if exclusive else "wb") as handle:
-        handle.write(value)
+def _write_file(path: pathlib.Path, value: bytes | memoryview, made_dirs: set[pathlib.Path] | None = None,
+                exclusive: bool = False) -> None:
+    """Write ``value`` as the file ``path``, first making its folders not in ``made_dirs`` (when given; see
+    :func:`_make_dirs`); an OS error names the file."""
+    with _naming_file(path):
+        if made_dirs is not None:
+            _make_dirs(path.parent, made_dirs)
+        with open(path, "xb" if exclusive else "wb") as handle:
+            handle.write(value)
 
 
 def create_arrays(root: zarr.Group, arrays: list[NewArray]) -> list[Any]:
@@ -556,10 +560,7 @@ def write_raw_frame(path: pathlib.Path, frame: np.ndarray, made_dirs: set[pathli
     …) are then made with one ``mkdir`` each instead of a walk up from the leaf, which fails first
     (directory operations are a good part of writing a frame on some file systems).
     """
-    with _naming_file(path):
-        _make_dirs(path.parent, made_dirs)
-        with open(path, "wb") as handle:
-            handle.write(memoryview(np.ascontiguousarray(frame)).cast("B"))
+    _write_file(path, memoryview(np.ascontiguousarray(frame)).cast("B"), made_dirs)
 
 
 def write_rows(array: Any, first_row: int, rows: np.ndarray, made_dirs: set[pathlib.Path]) -> None:
@@ -583,9 +584,7 @@ def write_rows(array: Any, first_row: int, rows: np.ndarray, made_dirs: set[path
     base = pathlib.Path(array.store.root) / array.path
     made_dirs.add(base)  # its metadata is there
     for key, value in made.items():
-        with _naming_file(base / key):
-            _make_dirs((base / key).parent, made_dirs)
-        _write_file(base / key, value)
+        _write_file(base / key, value, made_dirs)
 
 
 def _make_dirs(folder: pathlib.Path, made: set[pathlib.Path]) -> None:

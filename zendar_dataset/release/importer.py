@@ -448,9 +448,7 @@ class _SceneImport:
         """Write lidar ``name`` from ``sweeps`` (:func:`_lidar_sweeps`), taking them up to this lidar's end mark."""
         stamps = _Stamps(opened.summary)
         ecef_parts, dropped, points_in_enu = [], 0, False
-        for sweep_name, sweep, from_ecef in sweeps:
-            if sweep_name != name:
-                raise RuntimeError(f"lidar sweeps out of order: {sweep_name}'s while writing {name}")
+        for _, sweep, from_ecef in sweeps:  # in ``lidars``' order, as they are written
             if sweep is None:
                 break
             points_in_enu |= from_ecef
